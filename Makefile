@@ -1,0 +1,56 @@
+# fenicsmpm: `make test` and `make demo` do all the set-up on a fresh Debian 12 machine.
+SHELL := /bin/bash
+SYS_PYTHON := /usr/bin/python3
+VENV := .venv
+PY := $(VENV)/bin/python
+DEBS := python3-dolfinx python3-petsc4py python3-mpi4py python3-meshio python3-numba \
+        python3-scipy python3-matplotlib python3-pytest python3-setuptools python3-venv \
+        mpi-default-bin
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+MPI_ROOT := $(shell [ "$$(id -u)" = 0 ] && echo --allow-run-as-root)
+NP ?= 2
+MPIRUN := mpirun $(MPI_ROOT) -n $(NP)
+export OMPI_MCA_rmaps_base_oversubscribe = 1
+export OMPI_MCA_btl_vader_single_copy_mechanism = none
+
+.PHONY: all deps venv test test-serial test-mpi demo bench clean
+
+all: test
+
+# Debian packages: install only the missing ones.
+deps:
+	@missing=""; for p in $(DEBS); do \
+	  dpkg-query -W -f='$${Status}' $$p 2>/dev/null | grep -q "install ok installed" || missing="$$missing $$p"; \
+	done; \
+	if [ -n "$$missing" ]; then \
+	  echo "[make] installing Debian packages:$$missing"; \
+	  $(SUDO) apt-get update -qq && \
+	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
+	fi
+
+# Virtual environment that sees the Debian packages, with fenicsmpm installed editable.
+$(VENV)/.installed: pyproject.toml | deps
+	@test -x $(PY) || $(SYS_PYTHON) -m venv --system-site-packages $(VENV)
+	$(PY) -m pip install -q --no-build-isolation --no-deps -e .
+	@touch $@
+
+venv: $(VENV)/.installed
+
+test: $(VENV)/.installed
+	$(PY) -m pytest -q tests
+	timeout 1200 $(MPIRUN) $(PY) -m pytest -q tests
+
+test-serial: $(VENV)/.installed
+	$(PY) -m pytest -q tests
+
+test-mpi: $(VENV)/.installed
+	timeout 1200 $(MPIRUN) $(PY) -m pytest -q tests
+
+demo: $(VENV)/.installed
+	$(PY) demos/vibrating_bar.py
+
+bench: $(VENV)/.installed
+	$(PY) -m fenicsmpm.bench $(CASE)
+
+clean:
+	rm -rf $(VENV) results bench-results *.egg-info
