@@ -1,0 +1,172 @@
+"""Isotropic linear (hypo)elasticity with the Jaumann objective rate.
+
+Incremental update over one step with h = dF - I:
+    eps   = sym(h),  omega = skew(h) = (h - h^T)/2
+    sigma_new = sigma_old + lambda tr(eps) I + 2 mu eps + omega sigma_old - sigma_old omega
+(Jaumann-rate hypoelasticity, e.g. Belytschko, Liu & Moran, *Nonlinear Finite
+Elements for Continua and Structures*, sec. 5.7; the explicit-MPM update of
+Sulsky, Zhou & Schreyer 1995).  The update is exactly linear in h, so the
+tangent below is exact:
+    d sigma_ij / d h_kl = lambda d_ij d_kl + mu (d_ik d_jl + d_il d_jk)
+                        + 1/2 (d_ik s_lj - d_il s_kj) - 1/2 (s_ik d_jl - s_il d_jk),
+with s = sigma_old.
+"""
+import math
+
+import numba
+import numpy as np
+
+from .validation import check_open_interval, check_positive
+
+__all__ = ["LinearElastic", "IsotropicElasticParameters",
+           "linear_elastic_stress_kernel", "linear_elastic_tangent_kernel"]
+
+
+class IsotropicElasticParameters:
+    """Validated (E, nu, density) and the derived isotropic elastic constants.
+
+    mu = E / (2 (1 + nu)),  lambda = E nu / ((1 + nu)(1 - 2 nu)),
+    K = E / (3 (1 - 2 nu)),  M = E (1 - nu) / ((1 + nu)(1 - 2 nu)),
+    c_p = sqrt(M / rho),  c_s = sqrt(G / rho).
+    """
+
+    n_state = 0
+    name = "IsotropicElastic"
+
+    def _set_parameters(self, E, nu, density):
+        owner = type(self).__name__
+        self._E = check_positive(owner, "E", E)
+        self._nu = check_open_interval(owner, "nu", nu, -1.0, 0.5)
+        self._density = check_positive(owner, "density", density)
+
+    @property
+    def E(self):
+        """Young's modulus."""
+        return self._E
+
+    @property
+    def nu(self):
+        """Poisson's ratio."""
+        return self._nu
+
+    @property
+    def density(self):
+        """Mass density (reference)."""
+        return self._density
+
+    @property
+    def shear_modulus(self):
+        """G = mu = E / (2 (1 + nu))."""
+        return self._E / (2.0 * (1.0 + self._nu))
+
+    G = shear_modulus
+    mu = shear_modulus
+
+    @property
+    def lame_lambda(self):
+        """lambda = E nu / ((1 + nu)(1 - 2 nu))."""
+        return self._E * self._nu / ((1.0 + self._nu) * (1.0 - 2.0 * self._nu))
+
+    @property
+    def bulk_modulus(self):
+        """K = E / (3 (1 - 2 nu))."""
+        return self._E / (3.0 * (1.0 - 2.0 * self._nu))
+
+    K = bulk_modulus
+
+    @property
+    def constrained_modulus(self):
+        """M = E (1 - nu) / ((1 + nu)(1 - 2 nu)) = lambda + 2 mu (P-wave modulus)."""
+        return self._E * (1.0 - self._nu) / ((1.0 + self._nu) * (1.0 - 2.0 * self._nu))
+
+    @property
+    def p_wave_speed(self):
+        """c_p = sqrt(M / rho)."""
+        return math.sqrt(self.constrained_modulus / self._density)
+
+    @property
+    def s_wave_speed(self):
+        """c_s = sqrt(G / rho)."""
+        return math.sqrt(self.shear_modulus / self._density)
+
+    def __repr__(self):
+        return (f"{type(self).__name__}(E={self._E!r}, nu={self._nu!r}, "
+                f"density={self._density!r})")
+
+
+@numba.njit(cache=True)
+def linear_elastic_stress_kernel(idx, dF, sigma_old, sigma_new, lam, mu):
+    """sigma_new = sigma_old + lam tr(eps) I + 2 mu eps + omega sigma_old - sigma_old omega."""
+    eps = np.empty((3, 3))
+    om = np.empty((3, 3))
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        for i in range(3):
+            for j in range(3):
+                hij = dF[p, i, j] - (1.0 if i == j else 0.0)
+                hji = dF[p, j, i] - (1.0 if i == j else 0.0)
+                eps[i, j] = 0.5 * (hij + hji)
+                om[i, j] = 0.5 * (hij - hji)
+        tr = eps[0, 0] + eps[1, 1] + eps[2, 2]
+        for i in range(3):
+            for j in range(3):
+                s = sigma_old[p, i, j] + 2.0 * mu * eps[i, j]
+                if i == j:
+                    s += lam * tr
+                for m in range(3):
+                    s += om[i, m] * sigma_old[p, m, j] - sigma_old[p, i, m] * om[m, j]
+                sigma_new[p, i, j] = s
+
+
+@numba.njit(cache=True)
+def linear_elastic_tangent_kernel(idx, sigma_old, dsig, lam, mu):
+    """dsig[p,i,j,k,l] = lam d_ij d_kl + mu (d_ik d_jl + d_il d_jk)
+    + 1/2 (d_ik s_lj - d_il s_kj) - 1/2 (s_ik d_jl - s_il d_jk),  s = sigma_old."""
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        for i in range(3):
+            for j in range(3):
+                for k in range(3):
+                    for l in range(3):
+                        v = 0.0
+                        if i == j and k == l:
+                            v += lam
+                        if i == k and j == l:
+                            v += mu
+                        if i == l and j == k:
+                            v += mu
+                        if i == k:
+                            v += 0.5 * sigma_old[p, l, j]
+                        if i == l:
+                            v -= 0.5 * sigma_old[p, k, j]
+                        if j == l:
+                            v -= 0.5 * sigma_old[p, i, k]
+                        if j == k:
+                            v += 0.5 * sigma_old[p, i, l]
+                        dsig[p, i, j, k, l] = v
+
+
+class LinearElastic(IsotropicElasticParameters):
+    """Isotropic linear elasticity, Jaumann-rate hypoelastic update.
+
+    sigma_new = sigma_old + lambda tr(eps) I + 2 mu eps + omega sigma_old - sigma_old omega,
+    eps = sym(dF - I), omega = skew(dF - I)  (Belytschko, Liu & Moran, sec. 5.7).
+
+    Parameters: E > 0, -1 < nu < 0.5, density > 0 (finite reals).
+    """
+
+    name = "LinearElastic"
+    n_state = 0
+
+    def __init__(self, E, nu, density):
+        self._set_parameters(E, nu, density)
+
+    def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
+        """Write sigma_new[idx]; ``F_old`` and ``state`` are unused."""
+        linear_elastic_stress_kernel(np.asarray(idx, dtype=np.int64), dF, sigma_old,
+                                     sigma_new, self.lame_lambda, self.shear_modulus)
+
+    def tangent(self, idx, dF, F_old, sigma_old, sigma_new, state, dsig):
+        """Write dsig[idx] = d sigma_new / d dF (exact; depends only on sigma_old)."""
+        linear_elastic_tangent_kernel(np.asarray(idx, dtype=np.int64), sigma_old, dsig,
+                                      self.lame_lambda, self.shear_modulus)

@@ -1,0 +1,125 @@
+"""Stress-measure conversions and energy bookkeeping used by the solvers.
+
+All kernels are ``numba.njit(cache=True)`` loops over the particle subset
+``idx`` (int64); rows not in ``idx`` are neither read nor written.
+Tensors are 3x3 float64, contiguous, stacked along the first axis.
+"""
+import numba
+import numpy as np
+
+__all__ = ["first_piola", "first_piola_tangent", "strain_energy_increment",
+           "det3", "inv3"]
+
+
+@numba.njit(cache=True)
+def det3(A):
+    """Determinant of a 3x3 matrix (cofactor expansion along the first row)."""
+    return (A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+            - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+            + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]))
+
+
+@numba.njit(cache=True)
+def inv3(A, Ainv):
+    """Write the inverse of the 3x3 matrix ``A`` into ``Ainv`` (adjugate / det).
+
+    Returns det(A).  A singular ``A`` yields inf/NaN entries, no exception.
+    """
+    d = det3(A)
+    Ainv[0, 0] = A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1]
+    Ainv[0, 1] = A[0, 2] * A[2, 1] - A[0, 1] * A[2, 2]
+    Ainv[0, 2] = A[0, 1] * A[1, 2] - A[0, 2] * A[1, 1]
+    Ainv[1, 0] = A[1, 2] * A[2, 0] - A[1, 0] * A[2, 2]
+    Ainv[1, 1] = A[0, 0] * A[2, 2] - A[0, 2] * A[2, 0]
+    Ainv[1, 2] = A[0, 2] * A[1, 0] - A[0, 0] * A[1, 2]
+    Ainv[2, 0] = A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0]
+    Ainv[2, 1] = A[0, 1] * A[2, 0] - A[0, 0] * A[2, 1]
+    Ainv[2, 2] = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    if d == 0.0:
+        for i in range(3):
+            for j in range(3):
+                Ainv[i, j] = np.nan
+        return d
+    r = 1.0 / d
+    for i in range(3):
+        for j in range(3):
+            Ainv[i, j] *= r
+    return d
+
+
+@numba.njit(cache=True)
+def first_piola(idx, dF, sigma, P):
+    """First Piola-Kirchhoff stress relative to the start-of-step configuration.
+
+    P = J sigma dF^{-T},  J = det dF   (Nanson / Piola transform, e.g.
+    Bonet & Wood, *Nonlinear Continuum Mechanics for FE Analysis*, 2nd ed., eq. 5.42).
+    Writes P[idx], shape (n, 3, 3).
+    """
+    Finv = np.empty((3, 3))
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        J = inv3(dF[p], Finv)
+        for i in range(3):
+            for a in range(3):
+                s = 0.0
+                for j in range(3):
+                    s += sigma[p, i, j] * Finv[a, j]
+                P[p, i, a] = J * s
+
+
+@numba.njit(cache=True)
+def first_piola_tangent(idx, dF, sigma, dsig, A):
+    """Tangent of ``first_piola`` w.r.t. the incremental deformation gradient.
+
+    A[p,i,J,k,L] = dP_iJ / d dF_kL
+                 = J (dF^-1)_Lk sigma_ij (dF^-1)_Jj
+                 + J dsig_ijkL (dF^-1)_Jj
+                 - J sigma_ij (dF^-1)_Jk (dF^-1)_Lj          (sum over j),
+    using dJ = J (dF^-1)_Lk d dF_kL and d(dF^-1) = -dF^-1 d(dF) dF^-1
+    (Bonet & Wood 2008, sec. 2.3).  ``dsig`` = d sigma / d dF, shape (n,3,3,3,3).
+    """
+    Finv = np.empty((3, 3))
+    sFt = np.empty((3, 3))
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        J = inv3(dF[p], Finv)
+        # sFt_iJ = sigma_ij Finv_Jj   (sigma dF^{-T})
+        for i in range(3):
+            for a in range(3):
+                s = 0.0
+                for j in range(3):
+                    s += sigma[p, i, j] * Finv[a, j]
+                sFt[i, a] = s
+        for i in range(3):
+            for a in range(3):
+                for k in range(3):
+                    for L in range(3):
+                        v = Finv[L, k] * sFt[i, a] - sFt[i, L] * Finv[a, k]
+                        s = 0.0
+                        for j in range(3):
+                            s += dsig[p, i, j, k, L] * Finv[a, j]
+                        A[p, i, a, k, L] = J * (v + s)
+
+
+@numba.njit(cache=True)
+def strain_energy_increment(idx, dF, sigma_old, sigma_new, volume_old, volume_new, w):
+    """Trapezoidal strain-work increment, accumulated into ``w``.
+
+    w[p] += 1/2 (sigma_old : eps V_old + sigma_new : eps V_new),
+    eps = sym(dF - I)  (trapezoidal rule for the stress power integral
+    int sigma : d dot V dt, cf. Belytschko, Liu & Moran, *Nonlinear FE for
+    Continua and Structures*, sec. 6.2.6 energy balance).
+    ``volume_old``/``volume_new``/``w`` have shape (n,).
+    """
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        so = 0.0
+        sn = 0.0
+        for i in range(3):
+            for j in range(3):
+                e = 0.5 * (dF[p, i, j] + dF[p, j, i])
+                if i == j:
+                    e -= 1.0
+                so += sigma_old[p, i, j] * e
+                sn += sigma_new[p, i, j] * e
+        w[p] += 0.5 * (so * volume_old[p] + sn * volume_new[p])
