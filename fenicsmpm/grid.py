@@ -1,0 +1,209 @@
+"""Grid: a dolfinx mesh, its vector P1/Q1 space, point location and nodal exchange.
+
+The mesh belongs to dolfinx; this module only extracts the arrays the particle kernels need:
+node coordinates (ghost-inclusive, in the dof numbering of the vector space), the node
+indices of each cell, and per-cell affine data for simplices. Point location uses O(1)
+arithmetic on structured rectangle/box grids and a dolfinx bounding-box tree otherwise.
+"""
+import numpy as np
+import dolfinx
+from dolfinx import fem, geometry
+from dolfinx.mesh import CellType
+
+from .kernels import shape as ks
+
+_SUPPORTED = {
+    CellType.triangle: ks.SIMPLEX,
+    CellType.tetrahedron: ks.SIMPLEX,
+    CellType.quadrilateral: ks.TENSOR,
+    CellType.hexahedron: ks.TENSOR,
+}
+
+
+class Grid:
+    """Background grid over any dolfinx mesh of triangles, quadrilaterals, tetrahedra or
+    hexahedra with affine/multilinear (degree 1) geometry.
+
+    Attributes: `mesh`, `V` (vector Lagrange degree 1), `gdim`, `comm`, `n_nodes`
+    (ghost-inclusive), `n_owned_nodes`, `node_x` (n_nodes, gdim), `cell_nodes`
+    (n_cells, nodes_per_cell), `n_owned_cells`, `h` (smallest cell size, for the CFL
+    limit), `structured` (whether the O(1) locate path is used).
+    """
+
+    def __init__(self, mesh):
+        if not isinstance(mesh, dolfinx.mesh.Mesh):
+            raise TypeError(f"Grid: 'mesh' must be a dolfinx.mesh.Mesh, got {type(mesh).__name__}")
+        ct = mesh.topology.cell_type
+        if ct not in _SUPPORTED:
+            names = ", ".join(c.name for c in _SUPPORTED)
+            raise ValueError(f"Grid: unsupported cell type '{ct.name}'; supported: {names}")
+        if mesh.geometry.cmap.degree != 1:
+            raise ValueError(f"Grid: only degree-1 geometry is supported, got degree "
+                             f"{mesh.geometry.cmap.degree}")
+        if mesh.geometry.dim != mesh.topology.dim:
+            raise ValueError(f"Grid: manifold meshes are not supported (gdim={mesh.geometry.dim}, "
+                             f"tdim={mesh.topology.dim})")
+        self.mesh = mesh
+        self.comm = mesh.comm
+        self.cell_type = ct
+        self.kind = _SUPPORTED[ct]
+        self.gdim = mesh.geometry.dim
+        tdim = mesh.topology.dim
+        self.V = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
+        imap = self.V.dofmap.index_map
+        self.n_owned_nodes = imap.size_local
+        self.n_nodes = imap.size_local + imap.num_ghosts
+        cmap = mesh.topology.index_map(tdim)
+        self.n_owned_cells = cmap.size_local
+        self.n_cells = cmap.size_local + cmap.num_ghosts
+        nv = self.V.dofmap.dof_layout.num_dofs
+        self.cell_nodes = np.ascontiguousarray(
+            self.V.dofmap.list.array.reshape(-1, nv)[: self.n_cells], dtype=np.int32)
+        self.node_x = np.ascontiguousarray(self.V.tabulate_dof_coordinates()[:, : self.gdim])
+        self._affine_data()
+        self.h = self._min_cell_size()
+        self._structured = self._detect_structured()
+        self.structured = self._structured is not None
+        self._tree = None
+        self._exchange = {}
+
+    # ------------------------------------------------------------------ geometry data
+    def _affine_data(self):
+        d = self.gdim
+        nv = self.cell_nodes.shape[1]
+        self.simplex_Jinv = np.zeros((1, d, d))
+        self.simplex_grad = np.zeros((1, nv, d))
+        if self.kind != ks.SIMPLEX:
+            return
+        xc = self.node_x[self.cell_nodes]                     # (nc, d+1, d)
+        J = np.transpose(xc[:, 1:, :] - xc[:, :1, :], (0, 2, 1))   # J[c, i, k] = x_{k+1,i} - x_{0,i}
+        Jinv = np.linalg.inv(J)
+        grad = np.empty((len(xc), nv, d))
+        grad[:, 1:, :] = Jinv                                 # grad xi_k = row k of J^-1
+        grad[:, 0, :] = -Jinv.sum(axis=1)
+        self.simplex_Jinv = np.ascontiguousarray(Jinv)
+        self.simplex_grad = np.ascontiguousarray(grad)
+        self.cell_volume_ref = 1.0 / (2.0 if d == 2 else 6.0)
+
+    def _min_cell_size(self):
+        if self.n_cells == 0:
+            local = np.inf
+        elif self.kind == ks.SIMPLEX:
+            # smallest altitude = 1 / max |grad N_a|
+            local = 1.0 / np.max(np.linalg.norm(self.simplex_grad, axis=2))
+        else:
+            xc = self.node_x[self.cell_nodes]
+            edges = [np.linalg.norm(xc[:, a ^ (1 << k)] - xc[:, a], axis=1)
+                     for a in range(xc.shape[1]) for k in range(self.gdim) if not a & (1 << k)]
+            local = float(np.min(edges))
+        from mpi4py import MPI
+        return self.comm.allreduce(local, op=MPI.MIN) if self.comm.size > 1 else local
+
+    def _detect_structured(self):
+        """Recognise a lattice of equal axis-aligned boxes, each holding whole cells."""
+        if self.n_cells == 0:
+            return None
+        xc = self.node_x[self.cell_nodes]
+        cmin, cmax = xc.min(axis=1), xc.max(axis=1)
+        ext = cmax - cmin
+        spacing = ext[0].copy()
+        if np.any(spacing <= 0) or not np.allclose(ext, spacing, rtol=1e-9, atol=0.0):
+            return None
+        lo = self.node_x.min(axis=0)
+        t = (self.node_x - lo) / spacing
+        if not np.allclose(t, np.round(t), atol=1e-7):
+            return None
+        nbox = np.round((self.node_x.max(axis=0) - lo) / spacing).astype(np.int64)
+        ijk = np.floor(((cmin + cmax) / 2 - lo) / spacing).astype(np.int64)
+        strides = np.cumprod(np.concatenate([[1], nbox[:-1]]))
+        flat = ijk @ strides
+        order = np.argsort(flat, kind="stable")
+        counts = np.bincount(flat, minlength=int(np.prod(nbox)))
+        per_box = int(counts.max())
+        if per_box > 8:
+            return None
+        table = np.full((len(counts), per_box), -1, dtype=np.int32)
+        starts = np.concatenate([[0], np.cumsum(counts)[:-1]])
+        rank_in_box = np.arange(len(flat)) - starts[flat[order]]
+        table[flat[order], rank_in_box] = order.astype(np.int32)
+        return dict(origin=lo, spacing=spacing, nbox=nbox, table=table)
+
+    # ------------------------------------------------------------------ location
+    def locate(self, x, cells=None):
+        """Cell and reference coordinates of points x (n, gdim).
+
+        `cells` (optional) holds each point's previous cell: on unstructured meshes only the
+        points that left it are searched again. Points in no local cell get cell -1.
+        Returns (cells int32, xi float64)."""
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        n = x.shape[0]
+        xi = np.zeros((n, self.gdim))
+        out = np.full(n, -1, dtype=np.int32)
+        if n == 0:
+            return out, xi
+        s = self._structured
+        if s is not None:
+            ks.locate_structured(self.kind, x, s["origin"], s["spacing"], s["nbox"], s["table"],
+                                 self.cell_nodes, self.node_x, self.simplex_Jinv, out, xi)
+            return out, xi
+        inside = np.zeros(n, dtype=np.bool_)
+        if cells is not None:
+            out[:] = cells
+            ks.pull_back(self.kind, x, out, self.cell_nodes, self.node_x, self.simplex_Jinv,
+                         xi, inside)
+        lost = np.flatnonzero(~inside)
+        if len(lost):
+            found = self._tree_locate(x[lost])
+            out[lost] = found
+            xl = np.zeros((len(lost), self.gdim))
+            ok = np.zeros(len(lost), dtype=np.bool_)
+            ks.pull_back(self.kind, x[lost], found, self.cell_nodes, self.node_x,
+                         self.simplex_Jinv, xl, ok)
+            xi[lost] = xl
+            out[lost[~ok]] = -1
+        return out, xi
+
+    def _tree_locate(self, x):
+        if self._tree is None:
+            self._tree = geometry.BoundingBoxTree(self.mesh, self.mesh.topology.dim)
+        pts = np.zeros((len(x), 3))
+        pts[:, : self.gdim] = x
+        cand = geometry.compute_collisions(self._tree, pts)
+        coll = geometry.compute_colliding_cells(self.mesh, cand, pts)
+        off = coll.offsets
+        has = off[1:] > off[:-1]
+        cells = np.full(len(x), -1, dtype=np.int32)
+        cells[has] = coll.array[off[:-1][has]]
+        return cells
+
+    # ------------------------------------------------------------------ nodes
+    def nodes_where(self, where):
+        """Boolean mask over local nodes for a locator where(x) -> bool, x of shape (n, gdim)."""
+        mask = np.asarray(where(self.node_x), dtype=bool)
+        if mask.shape != (self.n_nodes,):
+            raise ValueError(f"locator must return one bool per point, shape ({self.n_nodes},), "
+                             f"got {mask.shape}")
+        return mask
+
+    def global_count(self, mask_owned):
+        """Global number of True entries in a mask over owned entities."""
+        n = int(np.count_nonzero(mask_owned))
+        return self.comm.allreduce(n) if self.comm.size > 1 else n
+
+    def accumulate(self, *arrays):
+        """Sum nodal contributions across ranks (reverse scatter with add, then forward).
+
+        A no-op on one rank. Each array has shape (n_nodes,) or (n_nodes, k)."""
+        if self.comm.size == 1:
+            return
+        from dolfinx.la import ScatterMode, vector
+        imap = self.V.dofmap.index_map
+        for arr in arrays:
+            bs = 1 if arr.ndim == 1 else arr.shape[1]
+            vec = self._exchange.get(bs)
+            if vec is None:
+                vec = self._exchange[bs] = vector(imap, bs=bs)
+            vec.array[:] = arr.ravel()
+            vec.scatter_reverse(ScatterMode.add)
+            vec.scatter_forward()
+            arr[...] = vec.array.reshape(arr.shape)

@@ -1,0 +1,169 @@
+"""Implicit MPM: Newmark dynamics and quasi-static loading, solved by Newton with PETSc KSP.
+
+Updated-Lagrangian step on the grid, with the start-of-step configuration as reference:
+unknown nodal displacement increment du, dF_p = I + sum du_i (x) grad N_ip,
+  f_int,i = sum_p V_p P_p grad N_ip,   P = det(dF) sigma dF^-T   (first Piola of the step),
+  K_ij    = sum_p V_p grad N_i . A_p . grad N_j,   A = dP/d(dF)   (consistent tangent).
+Newmark (beta, gamma) with lumped mass (seed 000 eqs 2.30-2.32, errata: 1/(beta dt^2), not 1/dt):
+  a^{n+1} = (du - dt v^n - dt^2 (1/2 - beta) a^n) / (beta dt^2),
+  v^{n+1} = v^n + dt ((1 - gamma) a^n + gamma a^{n+1}),
+  R = f_ext(t^{n+1}) - f_int(du) - M a^{n+1},   J = K + M / (beta dt^2).
+Quasi-static drops the inertia terms and ramps gravity over `load_steps` steps.
+Inactive (massless) nodes and Dirichlet dofs are constrained (unit diagonal, zero residual)."""
+import time
+
+import numpy as np
+
+from ..kernels import transfer as kt
+from ..materials import first_piola, first_piola_tangent
+from .linear_system import DEFAULT_PREFIX, LinearSystem
+
+
+class _Newton:
+    explicit = False
+
+    def __init__(self, rtol=1e-8, max_iter=25, flip=1.0, petsc_options=None, prefix=DEFAULT_PREFIX):
+        if not (rtol > 0):
+            raise ValueError(f"{type(self).__name__}: 'rtol' must be > 0, got {rtol!r}")
+        if not (isinstance(max_iter, int) and max_iter >= 1):
+            raise ValueError(f"{type(self).__name__}: 'max_iter' must be a positive integer, got {max_iter!r}")
+        self.rtol, self.max_iter, self.flip = rtol, max_iter, float(flip)
+        self.petsc_options, self.prefix = petsc_options, prefix
+        self.system = None
+        self.iterations = []     # Newton iterations per step
+        self.ksp_iterations = 0
+
+    def setup(self, sim):
+        self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix)
+
+    def _norm(self, sim, r):
+        own = r[: sim.grid.n_owned_nodes]
+        s = float(np.sum(own * own))
+        return np.sqrt(sim.comm.allreduce(s) if sim.comm.size > 1 else s)
+
+    def solve_step(self, sim, dt, f_ext, m_coef, inertia):
+        """Newton loop for du. inertia(du) returns the nodal inertial force M a^{n+1}(du) (or 0);
+        m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static)."""
+        p, grid, T, sys = sim.particles, sim.grid, sim.timers, self.system
+        n = len(p)
+        d = sim.gdim
+        m = sim.nodal["mass"]
+        constrained = (sim.fixed | ~sim.nodal["active"][:, None]).ravel()
+        cmask = constrained.reshape(-1, d)
+        du = np.zeros((grid.n_nodes, d))
+        plan = sys.plan(sim.nodes)
+        P = np.empty((n, 3, 3))
+        dsig = np.empty((n, 3, 3, 3, 3))
+        A4 = np.empty((n, 3, 3, 3, 3))
+        idx = np.arange(n, dtype=np.int64)
+        fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
+        for it in range(self.max_iter + 1):
+            t0 = time.perf_counter()
+            kt.incremental_F(sim.nodes, sim.dN, du, 1.0, sim._dF)
+            sig = sim.trial_stress(sim._dF)
+            t1 = time.perf_counter()
+            first_piola(idx, sim._dF, sig, P)
+            fint = np.zeros_like(du)
+            sim.internal_force(P, fint)          # -f_int (local)
+            grid.accumulate(fint)
+            R = f_ext + fint - inertia(du)
+            R[cmask] = 0.0
+            rnorm = self._norm(sim, R)
+            scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), 1e-300)
+            T["solve"] += time.perf_counter() - t1
+            if not np.isfinite(rnorm):
+                raise FloatingPointError(f"step {sim.step_count}, t = {sim.t:.6g}: non-finite "
+                                         f"residual in Newton iteration {it}")
+            if rnorm <= self.rtol * scale:
+                break
+            if it == self.max_iter:
+                raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not converge "
+                                   f"in {self.max_iter} iterations (|R|/|f| = {rnorm / scale:.3e})")
+            t2 = time.perf_counter()
+            for mat, gidx in sim.material_groups():
+                mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
+            first_piola_tangent(idx, sim._dF, sig, dsig, A4)
+            sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained)
+            t3 = time.perf_counter()
+            du += sys.solve(R)
+            t4 = time.perf_counter()
+            self.ksp_iterations += sys.iterations
+            T["assembly"] += t3 - t2
+            T["ksp"] += t4 - t3
+            T["solve"] += t4 - t2
+        self.iterations.append(it)
+        return du
+
+
+class Newmark(_Newton):
+    """Implicit Newmark (default beta = 1/4, gamma = 1/2: trapezoidal, unconditionally stable)."""
+
+    def __init__(self, beta=0.25, gamma=0.5, **kw):
+        super().__init__(**kw)
+        if not (0 < beta <= 0.5 and 0 <= gamma <= 1):
+            raise ValueError(f"Newmark: need 0 < beta <= 1/2 and 0 <= gamma <= 1, got beta={beta}, gamma={gamma}")
+        self.beta, self.gamma = float(beta), float(gamma)
+
+    def step(self, sim, dt):
+        p, grid = sim.particles, sim.grid
+        b, g = self.beta, self.gamma
+        sim.locate_and_shape()
+        t0 = time.perf_counter()
+        m = sim.nodal_mass()
+        mv = sim.nodal_weighted(p.v)
+        ma = sim.nodal_weighted(p.a)
+        f_ext = sim.external_force(sim.t + dt)
+        grid.accumulate(m, mv, ma, f_ext)
+        active = sim.active_mask(m)
+        v0 = np.zeros_like(mv)
+        a0 = np.zeros_like(ma)
+        v0[active] = mv[active] / m[active, None]
+        a0[active] = ma[active] / m[active, None]
+        v0[sim.fixed] = 0.0
+        a0[sim.fixed] = 0.0
+        sim.nodal = dict(mass=m, active=active)
+        sim.timers["p2g"] += time.perf_counter() - t0
+
+        def accel(du):
+            a1 = (du - dt * v0 - dt * dt * (0.5 - b) * a0) / (b * dt * dt)
+            a1[~active] = 0.0
+            return a1
+
+        du = self.solve_step(sim, dt, f_ext, 1.0 / (b * dt * dt), lambda du: m[:, None] * accel(du))
+        t0 = time.perf_counter()
+        a1 = accel(du)
+        a1[sim.fixed] = 0.0
+        v1 = v0 + dt * ((1 - g) * a0 + g * a1)
+        v1[~active] = 0.0
+        v1[sim.fixed] = 0.0
+        kt.interpolate(sim.nodes, sim.N, a1, p.a)
+        kt.g2p(sim.nodes, sim.N, du, v0, v1, self.flip, p.x, p.v, p.u)
+        sim.timers["g2p"] += time.perf_counter() - t0
+        sim.commit(sim._dF)
+        sim.nodal["velocity"] = v1
+
+
+class QuasiStatic(_Newton):
+    """Quasi-static Newton (no inertia). Gravity is ramped linearly over `load_steps` steps and
+    then held; tractions follow their own time functions."""
+
+    def __init__(self, load_steps=1, **kw):
+        super().__init__(**kw)
+        if not (isinstance(load_steps, int) and load_steps >= 1):
+            raise ValueError(f"QuasiStatic: 'load_steps' must be a positive integer, got {load_steps!r}")
+        self.load_steps = load_steps
+
+    def step(self, sim, dt):
+        p, grid = sim.particles, sim.grid
+        sim.locate_and_shape()
+        m = sim.nodal_mass()
+        scale = min(1.0, (sim.step_count + 1) / self.load_steps)
+        f_ext = sim.external_force(sim.t + dt, gravity_scale=scale)
+        grid.accumulate(m, f_ext)
+        sim.nodal = dict(mass=m, active=sim.active_mask(m))
+        du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0)
+        zero = np.zeros_like(du)
+        kt.g2p(sim.nodes, sim.N, du, zero, zero, 1.0, p.x, p.v, p.u)
+        p.v[:] = 0.0
+        sim.commit(sim._dF)
+        sim.nodal["velocity"] = du / dt

@@ -1,0 +1,101 @@
+"""The implicit grid system: a PETSc AIJ matrix with dolfinx's sparsity, filled from particle
+quadrature through a precomputed CSR scatter plan, and a KSP configured by PETSc options.
+
+Created only by implicit integrators (an explicit run builds no matrix and no KSP)."""
+import numpy as np
+import ufl
+from dolfinx import fem
+import dolfinx.fem.petsc
+from petsc4py import PETSc
+
+from ..kernels import transfer as kt
+
+DEFAULT_PREFIX = "fenicsmpm_"
+
+
+class LinearSystem:
+    """K du = R on the vector P1/Q1 space of `grid`.
+
+    The local (ghost-inclusive) CSR structure is the node adjacency of the cells expanded to
+    blocks; PETSc's matrix comes from dolfinx (`create_matrix` of a mass form, so the pattern
+    is dolfinx's), and every assembly is one `setValuesLocalCSR` call. Constrained dofs
+    (Dirichlet or inactive nodes) get a unit diagonal and zero right-hand side.
+
+    Solver options: PETSc options under `prefix` (default "fenicsmpm_"), e.g.
+    `-fenicsmpm_ksp_type cg -fenicsmpm_pc_type gamg`, or the `petsc_options` dict. The default
+    is a direct LU (MUMPS on several ranks)."""
+
+    def __init__(self, grid, petsc_options=None, prefix=DEFAULT_PREFIX):
+        self.grid = grid
+        bs = self.bs = grid.gdim
+        cn = grid.cell_nodes.astype(np.int64)
+        nv = cn.shape[1]
+        rows = np.repeat(cn, nv, axis=1).ravel()
+        cols = np.tile(cn, (1, nv)).ravel()
+        key = np.unique(rows * grid.n_nodes + cols)
+        adj_rows = key // grid.n_nodes
+        self.adj = np.ascontiguousarray(key % grid.n_nodes, dtype=np.int64)
+        counts = np.bincount(adj_rows, minlength=grid.n_nodes)
+        self.nodeptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        self.indptr, self.indices = kt.scalar_csr(self.nodeptr, self.adj, bs)
+        self.diag = kt.diagonal_slots(self.nodeptr, self.adj, bs)
+        self.data = np.zeros(len(self.indices))
+        u, w = ufl.TrialFunction(grid.V), ufl.TestFunction(grid.V)
+        self.A = dolfinx.fem.petsc.create_matrix(fem.form(ufl.inner(u, w) * ufl.dx))
+        self.b = fem.Function(grid.V)
+        self.x = fem.Function(grid.V)
+        self.n_owned_dofs = grid.n_owned_nodes * bs
+        self.ksp = PETSc.KSP().create(grid.comm)
+        self.ksp.setOperators(self.A)
+        self.ksp.setOptionsPrefix(prefix)
+        opts = PETSc.Options()
+        defaults = {"ksp_type": "preonly", "pc_type": "lu"}
+        if grid.comm.size > 1:
+            defaults["pc_factor_mat_solver_type"] = "mumps"
+        defaults.update(petsc_options or {})
+        for k, v in defaults.items():
+            if petsc_options and k in petsc_options or not opts.hasName(prefix + k):
+                opts[prefix + k] = v
+        self.ksp.setFromOptions()
+        self.iterations = 0
+
+    def plan(self, nodes):
+        """Scatter plan of the current particle-node connectivity (once per step)."""
+        plan = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int64)
+        kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
+        return plan
+
+    def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained):
+        """Fill K = sum_p V_p B^T A_p B + diag(diag_add) with unit rows on constrained dofs."""
+        self.data[:] = 0.0
+        kt.assemble_stiffness(nodes, dN, V, A4, plan, self.nodeptr, constrained, self.data)
+        own = self.n_owned_dofs
+        d = self.diag[:own]
+        self.data[d] += np.where(constrained[:own], 1.0, diag_add[:own])
+        self.A.zeroEntries()
+        self.A.setValuesLocalCSR(self.indptr, self.indices, self.data, addv=PETSc.InsertMode.ADD)
+        self.A.assemble()
+
+    def solve(self, R):
+        """Solve K dx = R, where R (n_nodes, gdim) is complete (already summed) on every rank."""
+        self.b.x.array[:] = R.ravel()
+        self.b.x.scatter_forward()
+        self.ksp.solve(self.b.vector, self.x.vector)
+        reason = self.ksp.getConvergedReason()
+        self.iterations = self.ksp.getIterationNumber()
+        if reason < 0:
+            raise RuntimeError(f"KSP failed: converged reason {reason} "
+                               f"({_reason_name(reason)}) after {self.iterations} iterations")
+        self.x.x.scatter_forward()
+        return self.x.x.array.reshape(R.shape).copy()
+
+    def destroy(self):
+        self.ksp.destroy()
+        self.A.destroy()
+
+
+def _reason_name(code):
+    for k, v in vars(PETSc.KSP.ConvergedReason).items():
+        if v == code and not k.startswith("_"):
+            return k
+    return "unknown"

@@ -1,0 +1,1 @@
+"""Numba kernels over contiguous particle and node arrays."""

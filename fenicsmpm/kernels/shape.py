@@ -1,0 +1,252 @@
+"""Numba kernels for point location and standard-MPM shape functions on P1/Q1 cells.
+
+Reference cells follow basix/dolfinx: the unit simplex with vertex 0 at the origin and
+vertex k+1 on axis k, and the unit square/cube with vertex a at the corner whose
+coordinate along axis k is bit k of a. So the Q1 basis is the tensor product
+N_a(xi) = prod_k (xi_k if bit_k(a) else 1 - xi_k), and the P1 basis is
+N_0 = 1 - sum(xi), N_{k+1} = xi_k.
+
+Kernels are written for any dimension d in {2, 3}; `kind` is 0 for simplices and 1 for
+tensor-product cells.
+"""
+import numpy as np
+from numba import njit
+
+SIMPLEX = 0
+TENSOR = 1
+INSIDE_TOL = 1e-10
+
+
+@njit(cache=True)
+def _q1_basis(xi, d, N, dNdxi):
+    """Q1 values N[a] and reference gradients dNdxi[a, m] at xi (tensor product)."""
+    nv = 1 << d
+    for a in range(nv):
+        val = 1.0
+        for k in range(d):
+            val *= xi[k] if (a >> k) & 1 else 1.0 - xi[k]
+        N[a] = val
+        for m in range(d):
+            g = 1.0 if (a >> m) & 1 else -1.0
+            for k in range(d):
+                if k != m:
+                    g *= xi[k] if (a >> k) & 1 else 1.0 - xi[k]
+            dNdxi[a, m] = g
+
+
+@njit(cache=True)
+def _inv_small(J, d, Jinv):
+    """Inverse of a 2x2 or 3x3 matrix; returns the determinant."""
+    if d == 2:
+        det = J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]
+        Jinv[0, 0] = J[1, 1] / det
+        Jinv[0, 1] = -J[0, 1] / det
+        Jinv[1, 0] = -J[1, 0] / det
+        Jinv[1, 1] = J[0, 0] / det
+        return det
+    det = (J[0, 0] * (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1])
+           - J[0, 1] * (J[1, 0] * J[2, 2] - J[1, 2] * J[2, 0])
+           + J[0, 2] * (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]))
+    Jinv[0, 0] = (J[1, 1] * J[2, 2] - J[1, 2] * J[2, 1]) / det
+    Jinv[0, 1] = (J[0, 2] * J[2, 1] - J[0, 1] * J[2, 2]) / det
+    Jinv[0, 2] = (J[0, 1] * J[1, 2] - J[0, 2] * J[1, 1]) / det
+    Jinv[1, 0] = (J[1, 2] * J[2, 0] - J[1, 0] * J[2, 2]) / det
+    Jinv[1, 1] = (J[0, 0] * J[2, 2] - J[0, 2] * J[2, 0]) / det
+    Jinv[1, 2] = (J[0, 2] * J[1, 0] - J[0, 0] * J[1, 2]) / det
+    Jinv[2, 0] = (J[1, 0] * J[2, 1] - J[1, 1] * J[2, 0]) / det
+    Jinv[2, 1] = (J[0, 1] * J[2, 0] - J[0, 0] * J[2, 1]) / det
+    Jinv[2, 2] = (J[0, 0] * J[1, 1] - J[0, 1] * J[1, 0]) / det
+    return det
+
+
+@njit(cache=True)
+def _pull_back_one(kind, c, x, cell_nodes, node_x, simplex_Jinv, xi):
+    """Reference coordinates xi of point x in cell c (affine for simplices, Newton for Q1)."""
+    d = x.shape[0]
+    n0 = cell_nodes[c, 0]
+    if kind == SIMPLEX:
+        for i in range(d):
+            s = 0.0
+            for j in range(d):
+                s += simplex_Jinv[c, i, j] * (x[j] - node_x[n0, j])
+            xi[i] = s
+        return
+    nv = 1 << d
+    N = np.empty(nv)
+    dN = np.empty((nv, d))
+    J = np.empty((d, d))
+    Jinv = np.empty((d, d))
+    r = np.empty(d)
+    for k in range(d):
+        xi[k] = 0.5
+    for it in range(20):
+        _q1_basis(xi, d, N, dN)
+        for i in range(d):
+            r[i] = -x[i]
+            for j in range(d):
+                J[i, j] = 0.0
+        for a in range(nv):
+            na = cell_nodes[c, a]
+            for i in range(d):
+                r[i] += N[a] * node_x[na, i]
+                for j in range(d):
+                    J[i, j] += node_x[na, i] * dN[a, j]
+        _inv_small(J, d, Jinv)
+        step = 0.0
+        for i in range(d):
+            s = 0.0
+            for j in range(d):
+                s += Jinv[i, j] * r[j]
+            xi[i] -= s
+            step += abs(s)
+        if step < 1e-13:
+            break
+
+
+@njit(cache=True)
+def _inside(kind, xi, tol):
+    d = xi.shape[0]
+    if kind == SIMPLEX:
+        s = 0.0
+        for k in range(d):
+            if xi[k] < -tol:
+                return False
+            s += xi[k]
+        return s <= 1.0 + tol
+    for k in range(d):
+        if xi[k] < -tol or xi[k] > 1.0 + tol:
+            return False
+    return True
+
+
+@njit(cache=True)
+def pull_back(kind, x, cells, cell_nodes, node_x, simplex_Jinv, xi_out, inside_out):
+    """Reference coordinates of each point in its given cell, and whether it lies inside.
+
+    Points with cells[p] < 0 are reported as outside."""
+    for p in range(x.shape[0]):
+        c = cells[p]
+        if c < 0:
+            inside_out[p] = False
+            continue
+        _pull_back_one(kind, c, x[p], cell_nodes, node_x, simplex_Jinv, xi_out[p])
+        inside_out[p] = _inside(kind, xi_out[p], INSIDE_TOL)
+
+
+@njit(cache=True)
+def locate_structured(kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+                      simplex_Jinv, cells_out, xi_out):
+    """O(1) location on a structured grid of boxes (rectangles or boxes split into cells).
+
+    The box index is found by arithmetic, then the (at most 6) cells of that box are tested.
+    Points outside every local box get cell -1."""
+    d = x.shape[1]
+    for p in range(x.shape[0]):
+        flat = 0
+        stride = 1
+        ok = True
+        for k in range(d):
+            t = (x[p, k] - origin[k]) / spacing[k]
+            i = int(np.floor(t))
+            if i == nbox[k] and t - nbox[k] < 1e-9:
+                i = nbox[k] - 1  # on the upper face
+            if i == -1 and t > -1e-9:
+                i = 0
+            if i < 0 or i >= nbox[k]:
+                ok = False
+                break
+            flat += i * stride
+            stride *= nbox[k]
+        cells_out[p] = -1
+        if not ok:
+            continue
+        for j in range(box_cells.shape[1]):
+            c = box_cells[flat, j]
+            if c < 0:
+                break
+            _pull_back_one(kind, c, x[p], cell_nodes, node_x, simplex_Jinv, xi_out[p])
+            if _inside(kind, xi_out[p], 1e-9):
+                cells_out[p] = c
+                break
+
+
+@njit(cache=True)
+def mpm_shape(kind, cells, xi, cell_nodes, node_x, simplex_grad, nodes_out, N_out, dN_out):
+    """Standard MPM shape functions: the Lagrange basis of the particle's cell at the particle.
+
+    nodes_out[p, a] = node index, N_out[p, a] = N_a(x_p), dN_out[p, a, :] = grad N_a(x_p)."""
+    d = xi.shape[1]
+    nv = cell_nodes.shape[1]
+    Nq = np.empty(nv)
+    dNq = np.empty((nv, d))
+    J = np.empty((d, d))
+    Jinv = np.empty((d, d))
+    for p in range(cells.shape[0]):
+        c = cells[p]
+        for a in range(nv):
+            nodes_out[p, a] = cell_nodes[c, a]
+        if kind == SIMPLEX:
+            s = 0.0
+            for k in range(d):
+                N_out[p, k + 1] = xi[p, k]
+                s += xi[p, k]
+            N_out[p, 0] = 1.0 - s
+            for a in range(nv):
+                for k in range(d):
+                    dN_out[p, a, k] = simplex_grad[c, a, k]
+            continue
+        _q1_basis(xi[p], d, Nq, dNq)
+        for i in range(d):
+            for j in range(d):
+                J[i, j] = 0.0
+        for a in range(nv):
+            na = cell_nodes[c, a]
+            for i in range(d):
+                for j in range(d):
+                    J[i, j] += node_x[na, i] * dNq[a, j]
+        _inv_small(J, d, Jinv)
+        for a in range(nv):
+            N_out[p, a] = Nq[a]
+            for k in range(d):
+                s = 0.0
+                for j in range(d):
+                    s += dNq[a, j] * Jinv[j, k]
+                dN_out[p, a, k] = s
+
+
+@njit(cache=True)
+def reference_points_to_physical(kind, cells, xi, cell_nodes, node_x, x_out, detJ_out):
+    """Map reference points to physical space; also return |det J| there (for volumes)."""
+    d = xi.shape[1]
+    nv = cell_nodes.shape[1]
+    Nq = np.empty(nv)
+    dNq = np.empty((nv, d))
+    J = np.empty((d, d))
+    Jinv = np.empty((d, d))
+    for p in range(cells.shape[0]):
+        c = cells[p]
+        if kind == SIMPLEX:
+            s = 0.0
+            for k in range(d):
+                Nq[k + 1] = xi[p, k]
+                s += xi[p, k]
+            Nq[0] = 1.0 - s
+            for a in range(nv):
+                for k in range(d):
+                    dNq[a, k] = 0.0
+            for k in range(d):
+                dNq[0, k] = -1.0
+                dNq[k + 1, k] = 1.0
+        else:
+            _q1_basis(xi[p], d, Nq, dNq)
+        for i in range(d):
+            x_out[p, i] = 0.0
+            for j in range(d):
+                J[i, j] = 0.0
+        for a in range(nv):
+            na = cell_nodes[c, a]
+            for i in range(d):
+                x_out[p, i] += Nq[a] * node_x[na, i]
+                for j in range(d):
+                    J[i, j] += node_x[na, i] * dNq[a, j]
+        detJ_out[p] = abs(_inv_small(J, d, Jinv))

@@ -1,0 +1,203 @@
+"""Numba kernels mapping between particles and grid nodes (P2G, G2P) and assembling the
+particle-quadrature stiffness into a CSR array.
+
+Shape data are padded arrays: nodes[p, a] (node index), N[p, a] (weight) and dN[p, a, :]
+(gradient). Every grid integral is a particle sum with weight V_p (DESIGN.md):
+  m_i = sum_p N_ip m_p,   (m v)_i = sum_p N_ip m_p v_p,
+  f_i = sum_p N_ip m_p g - sum_p V_p sigma_p . grad N_ip      (seed 000 eq 2.22, no D: errata)
+"""
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def p2g_mass(nodes, N, mass, m_out):
+    """m_i += sum_p N_ip m_p."""
+    for p in range(nodes.shape[0]):
+        for a in range(nodes.shape[1]):
+            m_out[nodes[p, a]] += N[p, a] * mass[p]
+
+
+@njit(cache=True)
+def p2g_weighted(nodes, N, mass, q, out):
+    """out_i += sum_p N_ip m_p q_p (momentum for q = v, mass-weighted acceleration for q = a)."""
+    d = q.shape[1]
+    for p in range(nodes.shape[0]):
+        for a in range(nodes.shape[1]):
+            w = N[p, a] * mass[p]
+            i = nodes[p, a]
+            for k in range(d):
+                out[i, k] += w * q[p, k]
+
+
+@njit(cache=True)
+def p2g_force(nodes, N, dN, mass, V, stress, g, out):
+    """out_i += sum_p (N_ip m_p g - V_p stress_p . grad N_ip).
+
+    `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
+    the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
+    d = g.shape[0]
+    for p in range(nodes.shape[0]):
+        for a in range(nodes.shape[1]):
+            i = nodes[p, a]
+            for k in range(d):
+                s = 0.0
+                for l in range(d):
+                    s += stress[p, k, l] * dN[p, a, l]
+                out[i, k] += N[p, a] * mass[p] * g[k] - V[p] * s
+
+
+@njit(cache=True)
+def interpolate(nodes, N, field, out):
+    """out_p = sum_i N_ip field_i."""
+    d = field.shape[1]
+    for p in range(nodes.shape[0]):
+        for k in range(d):
+            s = 0.0
+            for a in range(nodes.shape[1]):
+                s += N[p, a] * field[nodes[p, a], k]
+            out[p, k] = s
+
+
+@njit(cache=True)
+def incremental_F(nodes, dN, w, scale, dF_out):
+    """dF_p = I + scale * sum_i w_i (x) grad N_ip, as 3x3 (plane strain in 2D).
+
+    For w = grid velocity and scale = dt this is I + dt L (explicit); for w = the step's
+    displacement increment and scale = 1 it is the incremental deformation gradient."""
+    d = w.shape[1]
+    for p in range(nodes.shape[0]):
+        for i in range(3):
+            for j in range(3):
+                dF_out[p, i, j] = 1.0 if i == j else 0.0
+        for a in range(nodes.shape[1]):
+            n = nodes[p, a]
+            for i in range(d):
+                wi = scale * w[n, i]
+                for j in range(d):
+                    dF_out[p, i, j] += wi * dN[p, a, j]
+
+
+@njit(cache=True)
+def g2p(nodes, N, du, v_old, v_new, flip, x, v, u):
+    """Particle update from grid results (seed 002 §2; FLIP/PIC blend).
+
+    x_p += sum N du_i; u_p likewise;
+    v_p = flip (v_p + sum N (v_new - v_old)_i) + (1 - flip) sum N v_new_i."""
+    d = x.shape[1]
+    for p in range(nodes.shape[0]):
+        for k in range(d):
+            dx = 0.0
+            dv = 0.0
+            vp = 0.0
+            for a in range(nodes.shape[1]):
+                i = nodes[p, a]
+                w = N[p, a]
+                dx += w * du[i, k]
+                dv += w * (v_new[i, k] - v_old[i, k])
+                vp += w * v_new[i, k]
+            x[p, k] += dx
+            u[p, k] += dx
+            v[p, k] = flip * (v[p, k] + dv) + (1.0 - flip) * vp
+
+
+@njit(cache=True)
+def update_deformation(idx, dF, F, V, sigma, sigma_new):
+    """Commit a step: F <- dF F, V <- det(dF) V, sigma <- sigma_new (for particles in idx)."""
+    tmp = np.empty((3, 3))
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        for i in range(3):
+            for j in range(3):
+                s = 0.0
+                for k in range(3):
+                    s += dF[p, i, k] * F[p, k, j]
+                tmp[i, j] = s
+        F[p] = tmp
+        V[p] *= np.linalg.det(dF[p])
+        sigma[p] = sigma_new[p]
+
+
+# ---------------------------------------------------------------------- CSR assembly
+@njit(cache=True)
+def scalar_csr(nodeptr, adj, bs):
+    """Scalar CSR (indptr, indices) of a blocked pattern given node adjacency (nodeptr, adj).
+
+    Row i*bs+a lists columns j*bs+b for j in adj(i) (sorted) and b < bs."""
+    n = nodeptr.shape[0] - 1
+    indptr = np.zeros(n * bs + 1, dtype=np.int32)
+    for i in range(n):
+        deg = nodeptr[i + 1] - nodeptr[i]
+        for a in range(bs):
+            indptr[i * bs + a + 1] = indptr[i * bs + a] + deg * bs
+    indices = np.empty(indptr[-1], dtype=np.int32)
+    for i in range(n):
+        for a in range(bs):
+            pos = indptr[i * bs + a]
+            for q in range(nodeptr[i], nodeptr[i + 1]):
+                for b in range(bs):
+                    indices[pos] = adj[q] * bs + b
+                    pos += 1
+    return indptr, indices
+
+
+@njit(cache=True)
+def _find(adj, lo, hi, j):
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if adj[mid] < j:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@njit(cache=True)
+def stiffness_plan(nodes, nodeptr, adj, bs, plan_out):
+    """plan[p, a, b] = CSR offset of block (nodes[p,a], nodes[p,b]) (row component 0, col 0).
+
+    Entry (component r, component c) of that block sits at plan + r*deg(i)*bs + c."""
+    for p in range(nodes.shape[0]):
+        for a in range(nodes.shape[1]):
+            i = nodes[p, a]
+            for b in range(nodes.shape[1]):
+                pos = _find(adj, nodeptr[i], nodeptr[i + 1], nodes[p, b])
+                plan_out[p, a, b] = nodeptr[i] * bs * bs + (pos - nodeptr[i]) * bs
+
+
+@njit(cache=True)
+def diagonal_slots(nodeptr, adj, bs):
+    """CSR offset of each diagonal entry (dof i*bs+r)."""
+    n = nodeptr.shape[0] - 1
+    out = np.empty(n * bs, dtype=np.int64)
+    for i in range(n):
+        deg = nodeptr[i + 1] - nodeptr[i]
+        pos = _find(adj, nodeptr[i], nodeptr[i + 1], i) - nodeptr[i]
+        for r in range(bs):
+            out[i * bs + r] = nodeptr[i] * bs * bs + r * deg * bs + pos * bs + r
+    return out
+
+
+@njit(cache=True)
+def assemble_stiffness(nodes, dN, V, A, plan, nodeptr, constrained, data):
+    """data += sum_p V_p grad N_ia,J A_p[r, J, c, L] grad N_jb,L (particle quadrature of the
+    updated-Lagrangian tangent), skipping constrained rows and columns."""
+    d = dN.shape[2]
+    for p in range(nodes.shape[0]):
+        for a in range(nodes.shape[1]):
+            i = nodes[p, a]
+            deg = nodeptr[i + 1] - nodeptr[i]
+            for b in range(nodes.shape[1]):
+                j = nodes[p, b]
+                base = plan[p, a, b]
+                for r in range(d):
+                    if constrained[i * d + r]:
+                        continue
+                    for c in range(d):
+                        if constrained[j * d + c]:
+                            continue
+                        s = 0.0
+                        for J in range(d):
+                            for L in range(d):
+                                s += dN[p, a, J] * A[p, r, J, c, L] * dN[p, b, L]
+                        data[base + r * deg * d + c] += V[p] * s

@@ -1,0 +1,185 @@
+"""Particles: the material-point cloud as contiguous arrays (structure of arrays).
+
+Material points are a quadrature cloud: every grid integral is a sum over particles with
+weight V_p. `fill` places n points per direction in each owned cell with volumes equal to
+the cell measure split exactly (|det J| times the reference weight), so the cloud
+integrates the cell volume exactly.
+"""
+import numpy as np
+
+from .kernels import shape as ks
+
+# name -> (trailing shape as a function of gdim, dtype)
+FIELDS = {
+    "x": (lambda d: (d,), np.float64),        # position
+    "v": (lambda d: (d,), np.float64),        # velocity
+    "a": (lambda d: (d,), np.float64),        # acceleration (implicit integrators)
+    "u": (lambda d: (d,), np.float64),        # displacement since creation
+    "mass": (lambda d: (), np.float64),
+    "V0": (lambda d: (), np.float64),         # initial volume
+    "V": (lambda d: (), np.float64),          # current volume
+    "F": (lambda d: (3, 3), np.float64),      # deformation gradient (plane strain in 2D)
+    "stress": (lambda d: (3, 3), np.float64), # Cauchy stress, tension positive
+    "work": (lambda d: (), np.float64),       # accumulated stress work (strain energy) per particle
+    "material_id": (lambda d: (), np.int32),
+    "cell": (lambda d: (), np.int32),
+    "xi": (lambda d: (d,), np.float64),       # reference coordinates in `cell`
+    "id": (lambda d: (), np.int64),           # global particle id
+}
+
+
+def _reference_points(cell_type, n):
+    """n points per direction in the reference cell, and their weights (sum = ref volume)."""
+    from dolfinx.mesh import CellType
+    if cell_type in (CellType.quadrilateral, CellType.hexahedron):
+        d = 2 if cell_type == CellType.quadrilateral else 3
+        t = (np.arange(n) + 0.5) / n
+        pts = np.stack(np.meshgrid(*([t] * d), indexing="ij"), axis=-1).reshape(-1, d)
+        return pts, np.full(len(pts), 1.0 / n ** d)
+    if cell_type == CellType.triangle:
+        # centroids of the n^2 congruent sub-triangles
+        up = [((i + 1 / 3) / n, (j + 1 / 3) / n) for i in range(n) for j in range(n - i)]
+        down = [((i + 2 / 3) / n, (j + 2 / 3) / n) for i in range(n) for j in range(n - 1 - i)]
+        pts = np.array(up + down)
+        return pts, np.full(len(pts), 0.5 / n ** 2)
+    import basix
+    pts, wts = basix.make_quadrature(basix.QuadratureType.gauss_jacobi, basix.CellType.tetrahedron,
+                                     2 * n - 1)
+    return pts, wts
+
+
+class Particles:
+    """State arrays of the local particles (see FIELDS) plus the list of materials.
+
+    `material_id[p]` indexes `materials`; `state` holds per-particle history variables,
+    (n, max n_state of the materials)."""
+
+    def __init__(self, grid, materials, **arrays):
+        self.grid = grid
+        self.gdim = grid.gdim
+        self.materials = list(materials)
+        n = len(arrays["x"])
+        for name, (shape, dtype) in FIELDS.items():
+            arr = arrays.get(name)
+            if arr is None:
+                arr = np.zeros((n,) + shape(self.gdim), dtype=dtype)
+                if name == "F":
+                    arr[:] = np.eye(3)
+            setattr(self, name, np.ascontiguousarray(arr, dtype=dtype))
+        n_state = max([m.n_state for m in self.materials] + [0])
+        st = arrays.get("state")
+        self.state = np.zeros((n, n_state)) if st is None else np.ascontiguousarray(st)
+
+    def __len__(self):
+        return len(self.x)
+
+    @property
+    def n_global(self):
+        n = len(self)
+        return self.grid.comm.allreduce(n) if self.grid.comm.size > 1 else n
+
+    # ------------------------------------------------------------------ creation
+    @classmethod
+    def fill(cls, grid, material, per_cell=2, region=None, velocity=None):
+        """Fill every owned cell with per_cell points per direction.
+
+        region(x) -> bool (x of shape (n, gdim)) keeps a subset; velocity is a constant
+        vector or a callable velocity(x) -> (n, gdim)."""
+        if not isinstance(per_cell, (int, np.integer)) or per_cell < 1:
+            raise ValueError(f"Particles.fill: 'per_cell' must be a positive integer, got {per_cell!r}")
+        _check_material(material)
+        ref, w = _reference_points(grid.cell_type, int(per_cell))
+        nc = grid.n_owned_cells
+        cells = np.repeat(np.arange(nc, dtype=np.int32), len(ref))
+        xi = np.ascontiguousarray(np.tile(ref, (nc, 1)))
+        x = np.empty((len(cells), grid.gdim))
+        detJ = np.empty(len(cells))
+        ks.reference_points_to_physical(grid.kind, cells, xi, grid.cell_nodes, grid.node_x, x, detJ)
+        vol = detJ * np.tile(w, nc)
+        if region is not None:
+            keep = np.asarray(region(x), dtype=bool)
+            cells, xi, x, vol = cells[keep], xi[keep], x[keep], vol[keep]
+        if grid.global_count(np.ones(len(x), bool)) == 0:
+            raise ValueError("Particles.fill: the region selects no particle")
+        return cls._create(grid, material, x, vol, cells, xi, velocity)
+
+    @classmethod
+    def from_points(cls, grid, material, x, volume, velocity=None):
+        """Particles at given points (n, gdim) with given volumes (scalar or (n,))."""
+        _check_material(material)
+        x = np.ascontiguousarray(np.atleast_2d(np.asarray(x, dtype=np.float64)))
+        if x.shape[1] != grid.gdim:
+            raise ValueError(f"Particles.from_points: 'x' must have shape (n, {grid.gdim}), "
+                             f"got {x.shape}")
+        vol = np.broadcast_to(np.asarray(volume, dtype=np.float64), (len(x),)).copy()
+        if np.any(~np.isfinite(vol)) or np.any(vol <= 0):
+            bad = vol[~(vol > 0)][0] if np.any(~(vol > 0)) else vol[~np.isfinite(vol)][0]
+            raise ValueError(f"Particles.from_points: 'volume' must be > 0, got {bad}")
+        cells, xi = grid.locate(x)
+        outside = cells < 0
+        if np.any(outside):
+            i = int(np.flatnonzero(outside)[0])
+            raise ValueError(f"Particles.from_points: {int(outside.sum())} of {len(x)} points lie "
+                             f"outside the mesh, first at x = {tuple(x[i])}")
+        own = cells < grid.n_owned_cells
+        return cls._create(grid, material, x[own], vol[own], cells[own], xi[own], velocity)
+
+    @classmethod
+    def _create(cls, grid, material, x, vol, cells, xi, velocity):
+        n = len(x)
+        v = np.zeros((n, grid.gdim))
+        if velocity is not None:
+            v[:] = velocity(x) if callable(velocity) else np.asarray(velocity, dtype=np.float64)
+        p = cls(grid, [material], x=x, v=v, mass=material.density * vol, V0=vol, V=vol.copy(),
+                cell=cells, xi=xi)
+        p._number()
+        return p
+
+    def _number(self):
+        """Global ids 0..N-1, contiguous per rank."""
+        comm = self.grid.comm
+        start = comm.exscan(len(self)) if comm.size > 1 else 0
+        self.id = np.arange(start or 0, (start or 0) + len(self), dtype=np.int64)
+
+    def __add__(self, other):
+        """Concatenate two particle sets on the same grid (materials are merged)."""
+        if other.grid is not self.grid:
+            raise ValueError("Particles: cannot add particle sets on different grids")
+        mats = list(self.materials)
+        remap = np.empty(len(other.materials), dtype=np.int32)
+        for k, m in enumerate(other.materials):
+            if not any(m is q for q in mats):
+                mats.append(m)
+            remap[k] = next(i for i, q in enumerate(mats) if q is m)
+        arrays = {name: np.concatenate([getattr(self, name), getattr(other, name)])
+                  for name in FIELDS}
+        arrays["material_id"] = np.concatenate([self.material_id, remap[other.material_id]])
+        n_state = max([m.n_state for m in mats] + [0])
+        st = np.zeros((len(self) + len(other), n_state))
+        st[: len(self), : self.state.shape[1]] = self.state
+        st[len(self):, : other.state.shape[1]] = other.state
+        p = Particles(self.grid, mats, state=st, **arrays)
+        p._number()
+        return p
+
+    # ------------------------------------------------------------------ diagnostics
+    def total(self, values):
+        """Global sum of a per-particle quantity (array over local particles)."""
+        s = np.sum(values, axis=0)
+        return self.grid.comm.allreduce(s) if self.grid.comm.size > 1 else s
+
+    def kinetic_energy(self):
+        return float(self.total(0.5 * self.mass * np.einsum("pi,pi->p", self.v, self.v)))
+
+    def strain_energy(self):
+        return float(self.total(self.work))
+
+    def momentum(self):
+        return self.total(self.mass[:, None] * self.v)
+
+
+def _check_material(material):
+    for attr in ("density", "stress", "tangent", "n_state"):
+        if not hasattr(material, attr):
+            raise TypeError(f"Particles: 'material' must be a fenicsmpm material, got "
+                            f"{type(material).__name__}")

@@ -1,0 +1,338 @@
+"""Simulation: puts the pipeline stages of one step in order and runs the time loop.
+
+Stages (DESIGN.md): locate -> shape -> P2G -> grid solve (the integrator) -> G2P ->
+constitutive update. The integrator decides the order; the stage functions live here."""
+import math
+import time
+
+import numpy as np
+
+from .boundaries import Traction, TractionForms, fixed_dofs
+from .io import ParticleWriter, Progress, ProbeWriter
+from .kernels import shape as ks
+from .kernels import transfer as kt
+from .materials import strain_energy_increment
+
+PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
+                "acceleration": "a"}
+
+
+class Simulation:
+    """An MPM simulation of `particles` on `grid`, advanced by `integrator`.
+
+    dt: time step (> 0), or "auto" for explicit integrators (cfl * h / max c_p).
+    gravity: body acceleration vector (length gdim), default zero.
+    mass_tolerance: nodes with mass below this fraction of the largest nodal mass are
+    inactive (no velocity, no division by a vanishing mass; constrained in implicit solves)."""
+
+    def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
+                 mass_tolerance=1e-9):
+        self.grid = grid
+        self.particles = particles
+        self.integrator = integrator
+        self.comm = grid.comm
+        d = self.gdim = grid.gdim
+        if particles.grid is not grid:
+            raise ValueError("Simulation: 'particles' were created on a different grid")
+        self.gravity = np.zeros(d) if gravity is None else np.asarray(gravity, dtype=np.float64)
+        if self.gravity.shape != (d,) or not np.all(np.isfinite(self.gravity)):
+            raise ValueError(f"Simulation: 'gravity' must be a finite vector of length {d}, got {gravity!r}")
+        if not (0 < cfl <= 1):
+            raise ValueError(f"Simulation: 'cfl' must be in (0, 1], got {cfl!r}")
+        self.cfl = cfl
+        self.dt_critical = grid.h / max(m.p_wave_speed for m in particles.materials)
+        self.dt = self._check_dt(dt)
+        self.mass_tolerance = mass_tolerance
+        self.t = 0.0
+        self.step_count = 0
+        self.fixed = np.zeros((grid.n_nodes, d), dtype=bool)
+        self.tractions = []
+        self._traction_forms = None
+        self.probes = []
+        self.nodal = {}
+        self.stats = {}
+        self.timers = dict(locate=0.0, shape=0.0, p2g=0.0, solve=0.0, g2p=0.0, constitutive=0.0,
+                           assembly=0.0, ksp=0.0)
+        self._n_alloc = -1
+        integrator.setup(self)
+
+    def _check_dt(self, dt):
+        if isinstance(dt, str):
+            if dt != "auto":
+                raise ValueError(f"Simulation: 'dt' must be a positive number or 'auto', got {dt!r}")
+            if not self.integrator.explicit:
+                raise ValueError("Simulation: dt='auto' is only defined for explicit integrators")
+            return self.cfl * self.dt_critical
+        if not isinstance(dt, (int, float, np.floating)) or not math.isfinite(dt) or dt <= 0:
+            raise ValueError(f"Simulation: 'dt' must be > 0, got {dt!r}")
+        if self.integrator.explicit and dt > self.dt_critical:
+            raise ValueError(f"Simulation: dt = {dt:.4g} exceeds the explicit critical time step "
+                             f"h / c_p = {self.dt_critical:.4g} s")
+        return float(dt)
+
+    # ------------------------------------------------------------------ set-up API
+    def fix(self, where, components=None):
+        """Fix the given displacement components (default: all) at nodes where(x) is True.
+
+        A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1])."""
+        self.fixed |= fixed_dofs(self.grid, where, components)
+
+    def add_traction(self, where, value):
+        """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
+        self.tractions.append(Traction(where, value))
+        self._traction_forms = None
+
+    def probe(self, point, fields=("velocity",), path=None, every=1):
+        """Record fields of the particle nearest to `point` (by its initial position)."""
+        pr = Probe(self, point, fields, path, every)
+        self.probes.append(pr)
+        return pr
+
+    # ------------------------------------------------------------------ stages
+    def locate_and_shape(self):
+        """Locate particles (only the ones that left their cell are searched on unstructured
+        meshes) and evaluate the shape functions at their positions."""
+        p, g = self.particles, self.grid
+        t0 = time.perf_counter()
+        cells, xi = g.locate(p.x, p.cell)
+        lost = cells < 0
+        if np.any(lost):
+            i = np.flatnonzero(lost)[:5]
+            raise RuntimeError(f"step {self.step_count}, t = {self.t:.6g}: {int(lost.sum())} "
+                               f"particle(s) left the mesh, ids {p.id[i].tolist()} at "
+                               f"{np.round(p.x[i], 6).tolist()}")
+        p.cell, p.xi = cells, xi
+        t1 = time.perf_counter()
+        n, nv = len(p), g.cell_nodes.shape[1]
+        if n != self._n_alloc:
+            self.nodes = np.empty((n, nv), dtype=np.int32)
+            self.N = np.empty((n, nv))
+            self.dN = np.empty((n, nv, self.gdim))
+            self._dF = np.empty((n, 3, 3))
+            self._sigma_new = np.empty((n, 3, 3))
+            self._n_alloc = n
+        ks.mpm_shape(g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
+                     self.nodes, self.N, self.dN)
+        self.timers["locate"] += t1 - t0
+        self.timers["shape"] += time.perf_counter() - t1
+
+    def nodal_mass(self):
+        m = np.zeros(self.grid.n_nodes)
+        kt.p2g_mass(self.nodes, self.N, self.particles.mass, m)
+        return m
+
+    def nodal_weighted(self, q):
+        out = np.zeros((self.grid.n_nodes, self.gdim))
+        kt.p2g_weighted(self.nodes, self.N, self.particles.mass, q, out)
+        return out
+
+    def active_mask(self, m):
+        """Active nodes: mass above mass_tolerance times the global largest nodal mass."""
+        mmax = m.max() if len(m) else 0.0
+        if self.comm.size > 1:
+            from mpi4py import MPI
+            mmax = self.comm.allreduce(mmax, op=MPI.MAX)
+        return m > self.mass_tolerance * mmax
+
+    def external_force(self, t, gravity_scale=1.0):
+        """Local (not yet accumulated) nodal external force: gravity plus tractions at time t."""
+        f = np.zeros((self.grid.n_nodes, self.gdim))
+        if np.any(self.gravity):
+            p = self.particles
+            g = np.ascontiguousarray(np.broadcast_to(gravity_scale * self.gravity, (len(p), self.gdim)))
+            kt.p2g_weighted(self.nodes, self.N, p.mass, g, f)
+        if self.tractions:
+            if self._traction_forms is None:
+                self._traction_forms = TractionForms(self.grid, self.tractions)
+            self._traction_forms.assemble(t, f)
+        return f
+
+    def internal_force(self, stress, out, volume=None):
+        """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
+        p = self.particles
+        kt.p2g_force(self.nodes, self.N, self.dN, p.mass, p.V if volume is None else volume,
+                     stress, np.zeros(self.gdim), out)
+
+    def material_groups(self):
+        """(material, particle indices) per material present."""
+        p = self.particles
+        if len(p.materials) == 1:
+            return [(p.materials[0], np.arange(len(p), dtype=np.int64))]
+        return [(m, np.flatnonzero(p.material_id == k)) for k, m in enumerate(p.materials)]
+
+    def trial_stress(self, dF):
+        """Stress for the incremental deformation dF (not committed), in self._sigma_new."""
+        p = self.particles
+        t0 = time.perf_counter()
+        for mat, idx in self.material_groups():
+            mat.stress(idx, dF, p.F, p.stress, self._sigma_new, p.state)
+        self.timers["constitutive"] += time.perf_counter() - t0
+        return self._sigma_new
+
+    def commit(self, dF):
+        """Accept dF and the trial stress: update F, V, stress and the stress work."""
+        p = self.particles
+        t0 = time.perf_counter()
+        idx = np.arange(len(p), dtype=np.int64)
+        V_old = p.V.copy()
+        V_new = V_old * np.linalg.det(dF) if len(p) else V_old
+        strain_energy_increment(idx, dF, p.stress, self._sigma_new, V_old, V_new, p.work)
+        kt.update_deformation(idx, dF, p.F, p.V, p.stress, self._sigma_new)
+        self.timers["constitutive"] += time.perf_counter() - t0
+
+    def energy(self):
+        """Global kinetic and strain energy (collective)."""
+        p = self.particles
+        return dict(kinetic=p.kinetic_energy(), strain=p.strain_energy())
+
+    # ------------------------------------------------------------------ time loop
+    def step(self):
+        """Advance one time step."""
+        self.integrator.step(self, self.dt)
+        self.t += self.dt
+        self.step_count += 1
+        for pr in self.probes:
+            pr.record()
+
+    def run(self, t_end=None, steps=None, output=None, progress=None):
+        """Run until t_end or for a number of steps; write `output` (an Output) as configured.
+
+        progress: None (a line on a TTY for runs longer than a few seconds), True or False."""
+        if (t_end is None) == (steps is None):
+            raise ValueError("run: give exactly one of 't_end' or 'steps'")
+        if steps is None:
+            if not (isinstance(t_end, (int, float)) and t_end > self.t):
+                raise ValueError(f"run: 't_end' must be > current time {self.t}, got {t_end!r}")
+            steps = int(math.ceil((t_end - self.t) / self.dt - 1e-9))
+        elif not (isinstance(steps, (int, np.integer)) and steps >= 0):
+            raise ValueError(f"run: 'steps' must be a non-negative integer, got {steps!r}")
+        t_final = self.t + steps * self.dt
+        bar = Progress(steps, t_final, self.comm, force=progress)
+        if output is not None:
+            output.open(self)
+            if self.step_count == 0:
+                output.write(self)
+        try:
+            for k in range(steps):
+                self.step()
+                bar.update(k + 1, self.t)
+                if output is not None and self.step_count % output.every == 0:
+                    output.write(self)
+        finally:
+            bar.close()
+            if output is not None:
+                output.close()
+        return self
+
+
+class Probe:
+    """Time series of fields at the particle nearest to a point (answered by its owner rank)."""
+
+    def __init__(self, sim, point, fields, path, every):
+        p = sim.particles
+        point = np.asarray(point, dtype=np.float64)
+        bad = [f for f in fields if f not in PROBE_FIELDS]
+        if bad:
+            raise ValueError(f"probe: unknown field(s) {bad}; choose from {sorted(PROBE_FIELDS)}")
+        if point.shape != (sim.gdim,):
+            raise ValueError(f"probe: 'point' must have length {sim.gdim}, got {point.shape}")
+        x0 = p.x - p.u
+        dist = np.linalg.norm(x0 - point, axis=1) if len(p) else np.array([np.inf])
+        k = int(np.argmin(dist))
+        best = (float(dist[k]), sim.comm.rank)
+        if sim.comm.size > 1:
+            best = min(sim.comm.allgather(best))
+        self.owner = best[1]
+        self.sim, self.fields, self.every = sim, list(fields), every
+        self.mine = sim.comm.rank == self.owner
+        self.pid = int(p.id[k]) if self.mine else -1
+        self._idx = k
+        self.t, self.rows = [], []
+        cols = ["t"]
+        for f in self.fields:
+            cols += [f"{f}_{c}" for c in self._components(f)]
+        self.columns = cols
+        self.writer = ProbeWriter(path, cols, sim.comm, root=self.owner) if path else None
+        self.record()
+
+    def _components(self, f):
+        if f == "stress":
+            return ["xx", "yy", "zz", "xy", "yz", "xz"][: 6 if self.sim.gdim == 3 else 4]
+        return "xyz"[: self.sim.gdim]
+
+    def _value(self, f, i):
+        arr = getattr(self.sim.particles, PROBE_FIELDS[f])[i]
+        if f == "stress":
+            s = arr
+            vals = [s[0, 0], s[1, 1], s[2, 2], s[0, 1], s[1, 2], s[0, 2]]
+            return vals[: 6 if self.sim.gdim == 3 else 4]
+        return list(arr)
+
+    def record(self):
+        if not self.mine or self.sim.step_count % self.every:
+            return
+        ids = self.sim.particles.id
+        if not (self._idx < len(ids) and ids[self._idx] == self.pid):
+            self._idx = int(np.flatnonzero(ids == self.pid)[0])
+        row = [self.sim.t]
+        for f in self.fields:
+            row += self._value(f, self._idx)
+        self.rows.append(row)
+        if self.writer is not None:
+            self.writer.write_row(row)
+
+    def data(self):
+        """dict column -> array on every rank (collective; call outside the time loop)."""
+        rows = np.array(self.rows) if self.mine else None
+        if self.sim.comm.size > 1:
+            rows = self.sim.comm.bcast(rows, root=self.owner)
+        return {c: rows[:, j] for j, c in enumerate(self.columns)}
+
+
+class Output:
+    """Periodic output: particles as VTU (+ .pvd/.pvtu) and nodal fields as XDMF."""
+
+    def __init__(self, path, every=10, particle_fields=("v", "u", "stress", "mass", "V", "id"),
+                 grid_fields=True):
+        if not (isinstance(every, (int, np.integer)) and every >= 1):
+            raise ValueError(f"Output: 'every' must be a positive integer, got {every!r}")
+        self.path, self.every = str(path), int(every)
+        self.particle_fields, self.grid_fields = particle_fields, grid_fields
+        self._pw = self._xdmf = None
+        self._mode = "w"
+
+    def open(self, sim):
+        import os
+        if sim.comm.rank == 0:
+            os.makedirs(self.path, exist_ok=True)
+        if sim.comm.size > 1:
+            sim.comm.barrier()
+        if self._pw is None:
+            self._pw = ParticleWriter(os.path.join(self.path, "particles"), sim.comm)
+        if self.grid_fields and self._xdmf is None:
+            from dolfinx import fem, io
+            self._xdmf = io.XDMFFile(sim.comm, os.path.join(self.path, "grid.xdmf"), self._mode)
+            if self._mode == "w":
+                self._xdmf.write_mesh(sim.grid.mesh)
+            self._mode = "a"
+            self._vel = fem.Function(sim.grid.V, name="velocity")
+            self._dens = fem.Function(fem.FunctionSpace(sim.grid.mesh, ("Lagrange", 1)), name="mass")
+
+    def write(self, sim):
+        p = sim.particles
+        self._pw.write(sim.t, p.x, {f: getattr(p, f) for f in self.particle_fields})
+        if self._xdmf is not None and "velocity" in sim.nodal:
+            self._vel.x.array[:] = sim.nodal["velocity"].ravel()
+            self._dens.x.array[:] = sim.nodal["mass"]
+            self._xdmf.write_function(self._vel, sim.t)
+            self._xdmf.write_function(self._dens, sim.t)
+
+    def close(self):
+        if self._xdmf is not None:
+            self._xdmf.close()
+            self._xdmf = None
+
+    @property
+    def pvd(self):
+        import os
+        return os.path.join(self.path, "particles.pvd")
