@@ -69,6 +69,7 @@ class Particles:
         n_state = max([m.n_state for m in self.materials] + [0])
         st = arrays.get("state")
         self.state = np.zeros((n, n_state)) if st is None else np.ascontiguousarray(st)
+        self.version = 0          # bumped whenever particles are reshuffled (migration)
 
     def __len__(self):
         return len(self.x)
@@ -116,13 +117,13 @@ class Particles:
             bad = vol[~(vol > 0)][0] if np.any(~(vol > 0)) else vol[~np.isfinite(vol)][0]
             raise ValueError(f"Particles.from_points: 'volume' must be > 0, got {bad}")
         cells, xi = grid.locate(x)
-        outside = cells < 0
-        if np.any(outside):
-            i = int(np.flatnonzero(outside)[0])
-            raise ValueError(f"Particles.from_points: {int(outside.sum())} of {len(x)} points lie "
-                             f"outside the mesh, first at x = {tuple(x[i])}")
-        own = cells < grid.n_owned_cells
-        return cls._create(grid, material, x[own], vol[own], cells[own], xi[own], velocity)
+        p = cls._create(grid, material, x, vol, cells, xi, velocity)
+        ids, xs = p.send_to_owners()
+        if len(ids):
+            raise ValueError(f"Particles.from_points: {len(ids)} point(s) lie outside the mesh, "
+                             f"first at x = {tuple(xs[0])}")
+        p._number()
+        return p
 
     @classmethod
     def _create(cls, grid, material, x, vol, cells, xi, velocity):
@@ -134,6 +135,15 @@ class Particles:
                 cell=cells, xi=xi)
         p._number()
         return p
+
+    def send_to_owners(self):
+        """Hand particles to the rank owning their cell (MPI); return (ids, x) of particles
+        in no cell of the global mesh (the same on all ranks). `cell` must be current."""
+        if self.grid.comm.size > 1:
+            from .migration import migrate
+            return migrate(self)
+        out = self.cell < 0
+        return self.id[out], self.x[out]
 
     def _number(self):
         """Global ids 0..N-1, contiguous per rank."""

@@ -94,14 +94,13 @@ class Simulation:
         meshes) and evaluate the shape functions at their positions."""
         p, g = self.particles, self.grid
         t0 = time.perf_counter()
-        cells, xi = g.locate(p.x, p.cell)
-        lost = cells < 0
-        if np.any(lost):
-            i = np.flatnonzero(lost)[:5]
-            raise RuntimeError(f"step {self.step_count}, t = {self.t:.6g}: {int(lost.sum())} "
-                               f"particle(s) left the mesh, ids {p.id[i].tolist()} at "
-                               f"{np.round(p.x[i], 6).tolist()}")
-        p.cell, p.xi = cells, xi
+        p.cell, p.xi = g.locate(p.x, p.cell)
+        ids, xs = p.send_to_owners()
+        if len(ids):
+            raise RuntimeError(f"step {self.step_count}, t = {self.t:.6g}: {len(ids)} particle(s) "
+                               f"left the mesh, ids {ids[:5].tolist()} at "
+                               f"{np.round(xs[:5], 6).tolist()}")
+        cells, xi = p.cell, p.xi
         t1 = time.perf_counter()
         n, nv = len(p), g.cell_nodes.shape[1]
         if n != self._n_alloc:
@@ -222,6 +221,8 @@ class Simulation:
             bar.close()
             if output is not None:
                 output.close()
+            for pr in self.probes:
+                pr.finish()
         return self
 
 
@@ -244,15 +245,19 @@ class Probe:
             best = min(sim.comm.allgather(best))
         self.owner = best[1]
         self.sim, self.fields, self.every = sim, list(fields), every
-        self.mine = sim.comm.rank == self.owner
-        self.pid = int(p.id[k]) if self.mine else -1
-        self._idx = k
-        self.t, self.rows = [], []
+        self.pid = int(p.id[k]) if sim.comm.rank == self.owner else -1
+        if sim.comm.size > 1:
+            self.pid = sim.comm.bcast(self.pid, root=self.owner)
+        self._idx = k if sim.comm.rank == self.owner else -1
+        self._version = p.version
+        self.rows = []
         cols = ["t"]
         for f in self.fields:
             cols += [f"{f}_{c}" for c in self._components(f)]
         self.columns = cols
-        self.writer = ProbeWriter(path, cols, sim.comm, root=self.owner) if path else None
+        self.path = path
+        # serial runs stream rows to the CSV; parallel runs write it once per run() (rank 0)
+        self.writer = ProbeWriter(path, cols, sim.comm) if path and sim.comm.size == 1 else None
         self.record()
 
     def _components(self, f):
@@ -269,11 +274,15 @@ class Probe:
         return list(arr)
 
     def record(self):
-        if not self.mine or self.sim.step_count % self.every:
+        if self.sim.step_count % self.every:
             return
-        ids = self.sim.particles.id
-        if not (self._idx < len(ids) and ids[self._idx] == self.pid):
-            self._idx = int(np.flatnonzero(ids == self.pid)[0])
+        p = self.sim.particles
+        if p.version != self._version:          # particles were reshuffled between ranks
+            hit = np.flatnonzero(p.id == self.pid)
+            self._idx = int(hit[0]) if len(hit) else -1
+            self._version = p.version
+        if self._idx < 0:
+            return
         row = [self.sim.t]
         for f in self.fields:
             row += self._value(f, self._idx)
@@ -283,10 +292,21 @@ class Probe:
 
     def data(self):
         """dict column -> array on every rank (collective; call outside the time loop)."""
-        rows = np.array(self.rows) if self.mine else None
+        rows = self.rows
         if self.sim.comm.size > 1:
-            rows = self.sim.comm.bcast(rows, root=self.owner)
+            rows = sorted(r for part in self.sim.comm.allgather(rows) for r in part)
+        rows = np.array(rows).reshape(-1, len(self.columns))
         return {c: rows[:, j] for j, c in enumerate(self.columns)}
+
+    def finish(self):
+        """Write the CSV of a parallel run (collective); serial runs stream it."""
+        if self.path and self.sim.comm.size > 1:
+            d = self.data()
+            if self.sim.comm.rank == 0:
+                w = ProbeWriter(self.path, self.columns, None)
+                for row in np.column_stack([d[c] for c in self.columns]):
+                    w.write_row(list(row))
+                w.close()
 
 
 class Output:

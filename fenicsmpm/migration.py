@@ -1,0 +1,59 @@
+"""Particle ownership under MPI: each rank holds the particles inside its owned cells.
+
+After particles move, the ones located in a ghost cell are sent to that cell's owner
+(neighbour information from the cell index map). Particles found in no local cell, owned or
+ghost, take the fallback: their positions are shared with every rank, and the rank that owns
+a cell containing the point claims it. Particles no rank claims have left the global domain
+and are reported, never dropped silently. On one rank this module is never called."""
+import numpy as np
+
+from .particles import FIELDS
+
+
+def _pack(p, sel):
+    out = {name: getattr(p, name)[sel] for name in FIELDS}
+    out["state"] = p.state[sel]
+    return out
+
+
+def migrate(p):
+    """Send every particle whose `cell` is not an owned cell to the owning rank.
+
+    `p.cell` must be the result of locating p.x on this rank (-1: no local cell).
+    Returns (ids, positions) of the particles that no rank owns, identical on all ranks;
+    they stay on their rank with cell -1 and the caller decides what to do with them."""
+    grid = p.grid
+    comm = grid.comm
+    size, rank = comm.size, comm.rank
+    n_owned = grid.n_owned_cells
+    ghost_owner = grid.mesh.topology.index_map(grid.mesh.topology.dim).owners
+    cells = p.cell
+    dest = np.full(len(p), rank, dtype=np.int64)
+    ghost = cells >= n_owned
+    dest[ghost] = ghost_owner[cells[ghost] - n_owned]
+    # fallback for particles in no local cell: every rank tries to claim them
+    lost = np.flatnonzero(cells < 0)
+    all_lost = comm.allgather(p.x[lost])
+    if any(len(xs) for xs in all_lost):
+        claims = []
+        for xs in all_lost:
+            c, _ = grid.locate(xs) if len(xs) else (np.zeros(0, np.int32), None)
+            claims.append(np.where((c >= 0) & (c < n_owned), rank, size))
+        dest[lost] = np.min([cl[rank] for cl in comm.allgather(claims)], axis=0)
+        dest[dest >= size] = rank                    # unclaimed: outside the global domain
+    send = [_pack(p, np.flatnonzero(dest == r)) if r != rank else None for r in range(size)]
+    recv = comm.alltoall(send)
+    stay = np.flatnonzero(dest == rank)
+    n_stay = len(stay)
+    parts = [_pack(p, stay)] + [d for r, d in enumerate(recv) if r != rank]
+    for name in list(FIELDS) + ["state"]:
+        setattr(p, name, np.ascontiguousarray(np.concatenate([d[name] for d in parts])))
+    if len(p) > n_stay:                              # locate arrivals in this rank's numbering
+        c, xi = grid.locate(p.x[n_stay:])
+        p.cell[n_stay:] = c
+        p.xi[n_stay:] = xi
+    p.version += 1
+    gone = p.cell < 0
+    ids = np.concatenate(comm.allgather(p.id[gone]))
+    xs = np.concatenate(comm.allgather(p.x[gone]))
+    return ids, xs
