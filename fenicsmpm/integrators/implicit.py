@@ -22,12 +22,13 @@ from .linear_system import DEFAULT_PREFIX, LinearSystem
 class _Newton:
     explicit = False
 
-    def __init__(self, rtol=1e-8, max_iter=25, flip=1.0, petsc_options=None, prefix=DEFAULT_PREFIX):
-        if not (rtol > 0):
+    def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
+                 prefix=DEFAULT_PREFIX):
+        if not (rtol > 0 and utol > 0):
             raise ValueError(f"{type(self).__name__}: 'rtol' must be > 0, got {rtol!r}")
         if not (isinstance(max_iter, int) and max_iter >= 1):
             raise ValueError(f"{type(self).__name__}: 'max_iter' must be a positive integer, got {max_iter!r}")
-        self.rtol, self.max_iter, self.flip = rtol, max_iter, float(flip)
+        self.rtol, self.utol, self.max_iter, self.flip = rtol, utol, max_iter, float(flip)
         self.petsc_options, self.prefix = petsc_options, prefix
         self.system = None
         self.iterations = []     # Newton iterations per step
@@ -43,7 +44,10 @@ class _Newton:
 
     def solve_step(self, sim, dt, f_ext, m_coef, inertia):
         """Newton loop for du. inertia(du) returns the nodal inertial force M a^{n+1}(du) (or 0);
-        m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static)."""
+        m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static).
+
+        Converged when |R| <= rtol |f|, or when the last correction is below utol |du| with
+        |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|)."""
         p, grid, T, sys = sim.particles, sim.grid, sim.timers, self.system
         n = len(p)
         d = sim.gdim
@@ -57,6 +61,7 @@ class _Newton:
         A4 = np.empty((n, 3, 3, 3, 3))
         idx = np.arange(n, dtype=np.int64)
         fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
+        dnorm = np.inf
         for it in range(self.max_iter + 1):
             t0 = time.perf_counter()
             kt.incremental_F(sim.nodes, sim.dN, du, 1.0, sim._dF)
@@ -74,7 +79,8 @@ class _Newton:
             if not np.isfinite(rnorm):
                 raise FloatingPointError(f"step {sim.step_count}, t = {sim.t:.6g}: non-finite "
                                          f"residual in Newton iteration {it}")
-            if rnorm <= self.rtol * scale:
+            if rnorm <= self.rtol * scale or (
+                    dnorm <= self.utol * self._norm(sim, du) and rnorm <= np.sqrt(self.rtol) * scale):
                 break
             if it == self.max_iter:
                 raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not converge "
@@ -85,13 +91,16 @@ class _Newton:
             first_piola_tangent(idx, sim._dF, sig, dsig, A4)
             sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained)
             t3 = time.perf_counter()
-            du += sys.solve(R)
+            delta = sys.solve(R)
+            du += delta
+            dnorm = self._norm(sim, delta)
             t4 = time.perf_counter()
             self.ksp_iterations += sys.iterations
             T["assembly"] += t3 - t2
             T["ksp"] += t4 - t3
             T["solve"] += t4 - t2
         self.iterations.append(it)
+        sim.stats.update(newton_iterations=it, residual=rnorm / scale, ksp_iterations=sys.iterations)
         return du
 
 
