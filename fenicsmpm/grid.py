@@ -48,6 +48,7 @@ class Grid:
         self.cell_type = ct
         self.kind = _SUPPORTED[ct]
         self.gdim = mesh.geometry.dim
+        self.D = tuple(range(self.gdim))   # compile-time dimension for the numba kernels
         tdim = mesh.topology.dim
         self.V = fem.VectorFunctionSpace(mesh, ("Lagrange", 1))
         imap = self.V.dofmap.index_map
@@ -71,9 +72,20 @@ class Grid:
     def _affine_data(self):
         d = self.gdim
         nv = self.cell_nodes.shape[1]
-        self.simplex_Jinv = np.zeros((1, d, d))
+        self.simplex_Jinv = np.zeros((0, d, d))
         self.simplex_grad = np.zeros((1, nv, d))
+        self.affine_Jinv = self.simplex_Jinv
         if self.kind != ks.SIMPLEX:
+            # parallelogram/parallelepiped cells: x(xi) = x_0 + sum_k xi_k (x_{2^k} - x_0) is
+            # exact, so location is a single affine map (no Newton)
+            xc = self.node_x[self.cell_nodes]
+            if len(xc) == 0:
+                return
+            E = xc[:, [1 << k for k in range(d)], :] - xc[:, :1, :]          # (nc, d, d) rows = edges
+            bits = np.array([[(a >> k) & 1 for k in range(d)] for a in range(nv)], dtype=float)
+            pred = xc[:, :1, :] + np.einsum("ak,ckj->caj", bits, E)
+            if np.allclose(pred, xc, rtol=0, atol=1e-10 * max(1.0, np.abs(xc).max())):
+                self.affine_Jinv = np.ascontiguousarray(np.linalg.inv(np.transpose(E, (0, 2, 1))))
             return
         xc = self.node_x[self.cell_nodes]                     # (nc, d+1, d)
         J = np.transpose(xc[:, 1:, :] - xc[:, :1, :], (0, 2, 1))   # J[c, i, k] = x_{k+1,i} - x_{0,i}
@@ -81,7 +93,7 @@ class Grid:
         grad = np.empty((len(xc), nv, d))
         grad[:, 1:, :] = Jinv                                 # grad xi_k = row k of J^-1
         grad[:, 0, :] = -Jinv.sum(axis=1)
-        self.simplex_Jinv = np.ascontiguousarray(Jinv)
+        self.simplex_Jinv = self.affine_Jinv = np.ascontiguousarray(Jinv)
         self.simplex_grad = np.ascontiguousarray(grad)
         self.cell_volume_ref = 1.0 / (2.0 if d == 2 else 6.0)
 
@@ -144,12 +156,12 @@ class Grid:
         s = self._structured
         if s is not None:
             ks.locate_structured(self.kind, x, s["origin"], s["spacing"], s["nbox"], s["table"],
-                                 self.cell_nodes, self.node_x, self.simplex_Jinv, out, xi)
+                                 self.cell_nodes, self.node_x, self.affine_Jinv, out, xi)
             return out, xi
         inside = np.zeros(n, dtype=np.bool_)
         if cells is not None:
             out[:] = cells
-            ks.pull_back(self.kind, x, out, self.cell_nodes, self.node_x, self.simplex_Jinv,
+            ks.pull_back(self.kind, x, out, self.cell_nodes, self.node_x, self.affine_Jinv,
                          xi, inside)
         lost = np.flatnonzero(~inside)
         if len(lost):
@@ -158,7 +170,7 @@ class Grid:
             xl = np.zeros((len(lost), self.gdim))
             ok = np.zeros(len(lost), dtype=np.bool_)
             ks.pull_back(self.kind, x[lost], found, self.cell_nodes, self.node_x,
-                         self.simplex_Jinv, xl, ok)
+                         self.affine_Jinv, xl, ok)
             xi[lost] = xl
             out[lost[~ok]] = -1
         return out, xi

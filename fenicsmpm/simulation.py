@@ -110,10 +110,18 @@ class Simulation:
             self._dF = np.empty((n, 3, 3))
             self._sigma_new = np.empty((n, 3, 3))
             self._n_alloc = n
-        ks.mpm_shape(g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
+        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
                      self.nodes, self.N, self.dN)
         self.timers["locate"] += t1 - t0
         self.timers["shape"] += time.perf_counter() - t1
+
+    def nodal_mass_momentum(self):
+        """Local nodal mass and momentum in one particle pass (not yet summed over ranks)."""
+        m = np.zeros(self.grid.n_nodes)
+        mv = np.zeros((self.grid.n_nodes, self.gdim))
+        kt.p2g_mass_momentum(self.grid.D, self.nodes, self.N, self.particles.mass,
+                             self.particles.v, m, mv)
+        return m, mv
 
     def nodal_mass(self):
         m = np.zeros(self.grid.n_nodes)
@@ -122,7 +130,7 @@ class Simulation:
 
     def nodal_weighted(self, q):
         out = np.zeros((self.grid.n_nodes, self.gdim))
-        kt.p2g_weighted(self.nodes, self.N, self.particles.mass, q, out)
+        kt.p2g_weighted(self.grid.D, self.nodes, self.N, self.particles.mass, q, out)
         return out
 
     def active_mask(self, m):
@@ -133,23 +141,23 @@ class Simulation:
             mmax = self.comm.allreduce(mmax, op=MPI.MAX)
         return m > self.mass_tolerance * mmax
 
-    def external_force(self, t, gravity_scale=1.0):
-        """Local (not yet accumulated) nodal external force: gravity plus tractions at time t."""
-        f = np.zeros((self.grid.n_nodes, self.gdim))
-        if np.any(self.gravity):
-            p = self.particles
-            g = np.ascontiguousarray(np.broadcast_to(gravity_scale * self.gravity, (len(p), self.gdim)))
-            kt.p2g_weighted(self.nodes, self.N, p.mass, g, f)
+    def external_force(self, t, m, gravity_scale=1.0):
+        """Nodal external force, already summed over ranks: gravity sum_p N_ip m_p g = m_i g
+        (m: the summed nodal mass) plus the traction forms at time t."""
+        f = m[:, None] * (gravity_scale * self.gravity)
         if self.tractions:
             if self._traction_forms is None:
                 self._traction_forms = TractionForms(self.grid, self.tractions)
-            self._traction_forms.assemble(t, f)
+            ft = np.zeros_like(f)
+            self._traction_forms.assemble(t, ft)
+            self.grid.accumulate(ft)
+            f += ft
         return f
 
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
         p = self.particles
-        kt.p2g_force(self.nodes, self.N, self.dN, p.mass, p.V if volume is None else volume,
+        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, p.V if volume is None else volume,
                      stress, np.zeros(self.gdim), out)
 
     def material_groups(self):
@@ -173,10 +181,11 @@ class Simulation:
         p = self.particles
         t0 = time.perf_counter()
         idx = np.arange(len(p), dtype=np.int64)
-        V_old = p.V.copy()
-        V_new = V_old * np.linalg.det(dF) if len(p) else V_old
-        strain_energy_increment(idx, dF, p.stress, self._sigma_new, V_old, V_new, p.work)
-        kt.update_deformation(idx, dF, p.F, p.V, p.stress, self._sigma_new)
+        V_new = np.empty_like(p.V)
+        kt.scaled_volume(idx, dF, p.V, V_new)
+        strain_energy_increment(idx, dF, p.stress, self._sigma_new, p.V, V_new, p.work)
+        kt.update_deformation(idx, dF, p.F, p.stress, self._sigma_new)
+        p.V = V_new
         self.timers["constitutive"] += time.perf_counter() - t0
 
     def energy(self):

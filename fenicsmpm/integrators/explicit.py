@@ -40,7 +40,7 @@ class Explicit:
 
     def _stress_update(self, sim, v_grid, dt):
         dF = sim._dF
-        kt.incremental_F(sim.nodes, sim.dN, v_grid, dt, dF)
+        kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, v_grid, dt, dF)
         sim.trial_stress(dF)
         sim.commit(dF)
 
@@ -48,8 +48,7 @@ class Explicit:
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
         t0 = time.perf_counter()
-        m = sim.nodal_mass()
-        mv = sim.nodal_weighted(p.v)
+        m, mv = sim.nodal_mass_momentum()
         grid.accumulate(m, mv)
         active = sim.active_mask(m)
         v0 = self._grid_velocity(sim, mv, m, active)
@@ -57,15 +56,16 @@ class Explicit:
         if self.scheme == "USF":
             self._stress_update(sim, v0, dt)
         t0 = time.perf_counter()
-        f = sim.external_force(sim.t)
+        f = np.zeros_like(mv)
         sim.internal_force(p.stress, f)
         grid.accumulate(f)
+        f += sim.external_force(sim.t, m)
         t1 = time.perf_counter()
         v1 = v0.copy()
         v1[active] += dt * f[active] / m[active, None]
         v1[sim.fixed] = 0.0
         t2 = time.perf_counter()
-        kt.g2p(sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
+        kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1

@@ -64,7 +64,7 @@ class _Newton:
         dnorm = np.inf
         for it in range(self.max_iter + 1):
             t0 = time.perf_counter()
-            kt.incremental_F(sim.nodes, sim.dN, du, 1.0, sim._dF)
+            kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, du, 1.0, sim._dF)
             sig = sim.trial_stress(sim._dF)
             t1 = time.perf_counter()
             first_piola(idx, sim._dF, sig, P)
@@ -118,11 +118,10 @@ class Newmark(_Newton):
         b, g = self.beta, self.gamma
         sim.locate_and_shape()
         t0 = time.perf_counter()
-        m = sim.nodal_mass()
-        mv = sim.nodal_weighted(p.v)
+        m, mv = sim.nodal_mass_momentum()
         ma = sim.nodal_weighted(p.a)
-        f_ext = sim.external_force(sim.t + dt)
-        grid.accumulate(m, mv, ma, f_ext)
+        grid.accumulate(m, mv, ma)
+        f_ext = sim.external_force(sim.t + dt, m)
         active = sim.active_mask(m)
         v0 = np.zeros_like(mv)
         a0 = np.zeros_like(ma)
@@ -145,8 +144,8 @@ class Newmark(_Newton):
         v1 = v0 + dt * ((1 - g) * a0 + g * a1)
         v1[~active] = 0.0
         v1[sim.fixed] = 0.0
-        kt.interpolate(sim.nodes, sim.N, a1, p.a)
-        kt.g2p(sim.nodes, sim.N, du, v0, v1, self.flip, p.x, p.v, p.u)
+        kt.interpolate(sim.grid.D, sim.nodes, sim.N, a1, p.a)
+        kt.g2p(sim.grid.D, sim.nodes, sim.N, du, v0, v1, self.flip, p.x, p.v, p.u)
         sim.timers["g2p"] += time.perf_counter() - t0
         sim.commit(sim._dF)
         sim.nodal["velocity"] = v1
@@ -166,13 +165,13 @@ class QuasiStatic(_Newton):
         p, grid = sim.particles, sim.grid
         sim.locate_and_shape()
         m = sim.nodal_mass()
+        grid.accumulate(m)
         scale = min(1.0, (sim.step_count + 1) / self.load_steps)
-        f_ext = sim.external_force(sim.t + dt, gravity_scale=scale)
-        grid.accumulate(m, f_ext)
+        f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale)
         sim.nodal = dict(mass=m, active=sim.active_mask(m))
         du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0)
         zero = np.zeros_like(du)
-        kt.g2p(sim.nodes, sim.N, du, zero, zero, 1.0, p.x, p.v, p.u)
+        kt.g2p(sim.grid.D, sim.nodes, sim.N, du, zero, zero, 1.0, p.x, p.v, p.u)
         p.v[:] = 0.0
         sim.commit(sim._dF)
         sim.nodal["velocity"] = du / dt

@@ -60,23 +60,22 @@ def _inv_small(J, d, Jinv):
 
 
 @njit(cache=True)
-def _pull_back_one(kind, c, x, cell_nodes, node_x, simplex_Jinv, xi):
-    """Reference coordinates xi of point x in cell c (affine for simplices, Newton for Q1)."""
+def _pull_back_one(kind, c, x, cell_nodes, node_x, affine_Jinv, xi, N, dN, J, Jinv, r):
+    """Reference coordinates xi of point x in cell c.
+
+    Affine cells (all simplices; parallelogram quads/hexes when affine_Jinv has one entry
+    per cell): xi = J^-1 (x - x_0). Other Q1 cells: Newton on the multilinear map, with the
+    scratch arrays N, dN, J, Jinv, r supplied by the caller (no allocation per point)."""
     d = x.shape[0]
     n0 = cell_nodes[c, 0]
-    if kind == SIMPLEX:
+    if kind == SIMPLEX or affine_Jinv.shape[0] > 0:
         for i in range(d):
             s = 0.0
             for j in range(d):
-                s += simplex_Jinv[c, i, j] * (x[j] - node_x[n0, j])
+                s += affine_Jinv[c, i, j] * (x[j] - node_x[n0, j])
             xi[i] = s
         return
     nv = 1 << d
-    N = np.empty(nv)
-    dN = np.empty((nv, d))
-    J = np.empty((d, d))
-    Jinv = np.empty((d, d))
-    r = np.empty(d)
     for k in range(d):
         xi[k] = 0.5
     for it in range(20):
@@ -120,27 +119,33 @@ def _inside(kind, xi, tol):
 
 
 @njit(cache=True)
-def pull_back(kind, x, cells, cell_nodes, node_x, simplex_Jinv, xi_out, inside_out):
+def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out):
     """Reference coordinates of each point in its given cell, and whether it lies inside.
 
-    Points with cells[p] < 0 are reported as outside."""
+    affine_Jinv: per-cell inverse Jacobians of affine cells, or an array of shape (0, d, d)
+    for general Q1 cells (Newton). Points with cells[p] < 0 are reported as outside."""
+    d = x.shape[1]
+    nv = cell_nodes.shape[1]
+    N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
     for p in range(x.shape[0]):
         c = cells[p]
         if c < 0:
             inside_out[p] = False
             continue
-        _pull_back_one(kind, c, x[p], cell_nodes, node_x, simplex_Jinv, xi_out[p])
+        _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
         inside_out[p] = _inside(kind, xi_out[p], INSIDE_TOL)
 
 
 @njit(cache=True)
 def locate_structured(kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
-                      simplex_Jinv, cells_out, xi_out):
+                      affine_Jinv, cells_out, xi_out):
     """O(1) location on a structured grid of boxes (rectangles or boxes split into cells).
 
     The box index is found by arithmetic, then the (at most 6) cells of that box are tested.
     Points outside every local box get cell -1."""
     d = x.shape[1]
+    nv = cell_nodes.shape[1]
+    N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
     for p in range(x.shape[0]):
         flat = 0
         stride = 1
@@ -164,18 +169,19 @@ def locate_structured(kind, x, origin, spacing, nbox, box_cells, cell_nodes, nod
             c = box_cells[flat, j]
             if c < 0:
                 break
-            _pull_back_one(kind, c, x[p], cell_nodes, node_x, simplex_Jinv, xi_out[p])
+            _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
             if _inside(kind, xi_out[p], 1e-9):
                 cells_out[p] = c
                 break
 
 
 @njit(cache=True)
-def mpm_shape(kind, cells, xi, cell_nodes, node_x, simplex_grad, nodes_out, N_out, dN_out):
+def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, nodes_out, N_out, dN_out):
     """Standard MPM shape functions: the Lagrange basis of the particle's cell at the particle.
 
-    nodes_out[p, a] = node index, N_out[p, a] = N_a(x_p), dN_out[p, a, :] = grad N_a(x_p)."""
-    d = xi.shape[1]
+    nodes_out[p, a] = node index, N_out[p, a] = N_a(x_p), dN_out[p, a, :] = grad N_a(x_p).
+    D: tuple of length gdim (compile-time dimension)."""
+    d = len(D)
     nv = cell_nodes.shape[1]
     Nq = np.empty(nv)
     dNq = np.empty((nv, d))

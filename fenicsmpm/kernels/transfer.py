@@ -2,12 +2,16 @@
 particle-quadrature stiffness into a CSR array.
 
 Shape data are padded arrays: nodes[p, a] (node index), N[p, a] (weight) and dN[p, a, :]
-(gradient). Every grid integral is a particle sum with weight V_p (DESIGN.md):
+(gradient). `D` is a tuple of length gdim: its length is a compile-time constant for numba,
+so the short loops over dimensions are unrolled (about 2x faster than a runtime d).
+Every grid integral is a particle sum with weight V_p (DESIGN.md):
   m_i = sum_p N_ip m_p,   (m v)_i = sum_p N_ip m_p v_p,
   f_i = sum_p N_ip m_p g - sum_p V_p sigma_p . grad N_ip      (seed 000 eq 2.22, no D: errata)
 """
 import numpy as np
 from numba import njit
+
+from ..materials.piola import det3
 
 
 @njit(cache=True)
@@ -19,9 +23,23 @@ def p2g_mass(nodes, N, mass, m_out):
 
 
 @njit(cache=True)
-def p2g_weighted(nodes, N, mass, q, out):
+def p2g_mass_momentum(D, nodes, N, mass, v, m_out, mv_out):
+    """m_i += sum_p N_ip m_p and (m v)_i += sum_p N_ip m_p v_p in one pass."""
+    d = len(D)
+    for p in range(nodes.shape[0]):
+        mp = mass[p]
+        for a in range(nodes.shape[1]):
+            w = N[p, a] * mp
+            i = nodes[p, a]
+            m_out[i] += w
+            for k in range(d):
+                mv_out[i, k] += w * v[p, k]
+
+
+@njit(cache=True)
+def p2g_weighted(D, nodes, N, mass, q, out):
     """out_i += sum_p N_ip m_p q_p (momentum for q = v, mass-weighted acceleration for q = a)."""
-    d = q.shape[1]
+    d = len(D)
     for p in range(nodes.shape[0]):
         for a in range(nodes.shape[1]):
             w = N[p, a] * mass[p]
@@ -31,12 +49,12 @@ def p2g_weighted(nodes, N, mass, q, out):
 
 
 @njit(cache=True)
-def p2g_force(nodes, N, dN, mass, V, stress, g, out):
+def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
     """out_i += sum_p (N_ip m_p g - V_p stress_p . grad N_ip).
 
     `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
     the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
-    d = g.shape[0]
+    d = len(D)
     for p in range(nodes.shape[0]):
         for a in range(nodes.shape[1]):
             i = nodes[p, a]
@@ -48,9 +66,9 @@ def p2g_force(nodes, N, dN, mass, V, stress, g, out):
 
 
 @njit(cache=True)
-def interpolate(nodes, N, field, out):
+def interpolate(D, nodes, N, field, out):
     """out_p = sum_i N_ip field_i."""
-    d = field.shape[1]
+    d = len(D)
     for p in range(nodes.shape[0]):
         for k in range(d):
             s = 0.0
@@ -60,12 +78,12 @@ def interpolate(nodes, N, field, out):
 
 
 @njit(cache=True)
-def incremental_F(nodes, dN, w, scale, dF_out):
+def incremental_F(D, nodes, dN, w, scale, dF_out):
     """dF_p = I + scale * sum_i w_i (x) grad N_ip, as 3x3 (plane strain in 2D).
 
     For w = grid velocity and scale = dt this is I + dt L (explicit); for w = the step's
     displacement increment and scale = 1 it is the incremental deformation gradient."""
-    d = w.shape[1]
+    d = len(D)
     for p in range(nodes.shape[0]):
         for i in range(3):
             for j in range(3):
@@ -79,12 +97,12 @@ def incremental_F(nodes, dN, w, scale, dF_out):
 
 
 @njit(cache=True)
-def g2p(nodes, N, du, v_old, v_new, flip, x, v, u):
+def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
     """Particle update from grid results (seed 002 §2; FLIP/PIC blend).
 
     x_p += sum N du_i; u_p likewise;
     v_p = flip (v_p + sum N (v_new - v_old)_i) + (1 - flip) sum N v_new_i."""
-    d = x.shape[1]
+    d = len(D)
     for p in range(nodes.shape[0]):
         for k in range(d):
             dx = 0.0
@@ -102,20 +120,26 @@ def g2p(nodes, N, du, v_old, v_new, flip, x, v, u):
 
 
 @njit(cache=True)
-def update_deformation(idx, dF, F, V, sigma, sigma_new):
-    """Commit a step: F <- dF F, V <- det(dF) V, sigma <- sigma_new (for particles in idx)."""
+def scaled_volume(idx, dF, V, V_out):
+    """V_out = det(dF) V for particles in idx."""
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        V_out[p] = det3(dF[p]) * V[p]
+
+
+@njit(cache=True)
+def update_deformation(idx, dF, F, sigma, sigma_new):
+    """Commit a step: F <- dF F, sigma <- sigma_new (for particles in idx)."""
     tmp = np.empty((3, 3))
     for q in range(idx.shape[0]):
         p = idx[q]
         for i in range(3):
             for j in range(3):
-                s = 0.0
-                for k in range(3):
-                    s += dF[p, i, k] * F[p, k, j]
-                tmp[i, j] = s
-        F[p] = tmp
-        V[p] *= np.linalg.det(dF[p])
-        sigma[p] = sigma_new[p]
+                tmp[i, j] = dF[p, i, 0] * F[p, 0, j] + dF[p, i, 1] * F[p, 1, j] + dF[p, i, 2] * F[p, 2, j]
+        for i in range(3):
+            for j in range(3):
+                F[p, i, j] = tmp[i, j]
+                sigma[p, i, j] = sigma_new[p, i, j]
 
 
 # ---------------------------------------------------------------------- CSR assembly

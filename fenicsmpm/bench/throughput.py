@@ -1,0 +1,286 @@
+"""Benchmark case `throughput`: particle updates per second and where a step's time goes.
+
+Scene: a 2D plane-strain linear-elastic block (E = 1 MPa, nu = 0.3, rho = 1000 kg/m^3) in a
+unit-square structured quadrilateral grid, resting on a fixed base (all displacement
+components fixed at y = 0) with MARGIN empty cells on its left, right and top, loaded by
+gravity from rest, so it compresses and bulges.
+
+Runs (full size / --quick):
+  explicit MUSL, USL, USF: 512^2 cells, 2x2 particles per cell -> 1.04e6 particles, 20 steps
+      after 2 warm-up steps, dt = "auto" (cfl 0.5)     / quick: MUSL only, 164^2 cells (1.0e5)
+  implicit Newmark: 164^2 cells, 2x2 ppc -> 1.04e5 particles, 3 steps after 1 warm-up step,
+      dt = 5 h / c_p (5x the explicit critical step), default KSP (direct LU)
+                                                        / quick: 74^2 cells (2.0e4), 2 steps
+  implicit Newmark with GMRES + block Jacobi/ILU (full size only): assembly against a cheap
+      iterative solve (the mass term makes the system well conditioned at this dt)
+The warm-up absorbs numba compilation and first-call set-up; sim.timers are zeroed after it.
+
+Metrics per run: particle_updates_per_s = n_particles * steps / wall_s; t_<stage> (seconds
+per step, from sim.timers: locate, shape, p2g, solve, g2p, constitutive; implicit also
+assembly and ksp, which are parts of solve) and frac_<stage> (of the wall time per step);
+t_other (wall per step minus the stages: untimed work); implicit: assembly_over_ksp,
+newton_iterations (mean per step), ksp_iterations (per step); memory: peak_rss_bytes,
+mem_bytes_per_particle (peak RSS increase during the run / particles) and
+particle_array_bytes_per_particle (per-particle state and work arrays / particles)."""
+import gc
+import math
+import os
+
+import numpy as np
+
+from . import common
+
+CASE = "throughput"
+
+E, NU, RHO, GRAVITY = 1.0e6, 0.3, 1000.0, 9.81
+LENGTH = 1.0
+MARGIN = 2          # empty cells left, right and above the block
+MIN_CELLS = 2 * MARGIN + 4
+
+# name, integrator, scheme, cells per side, particles per cell per direction, steps, warm-up
+FULL = [
+    dict(name="explicit-MUSL", integrator="Explicit", scheme="MUSL", cells=512, per_cell=2,
+         steps=20, warmup=2),
+    dict(name="explicit-USL", integrator="Explicit", scheme="USL", cells=512, per_cell=2,
+         steps=20, warmup=2),
+    dict(name="explicit-USF", integrator="Explicit", scheme="USF", cells=512, per_cell=2,
+         steps=20, warmup=2),
+    dict(name="implicit-Newmark", integrator="Newmark", scheme="Newmark", cells=164,
+         per_cell=2, steps=3, warmup=1, dt_factor=5.0),
+    # the same with an iterative KSP: how assembly compares with a cheap linear solve
+    dict(name="implicit-Newmark-gmres", integrator="Newmark", scheme="Newmark", cells=164,
+         per_cell=2, steps=3, warmup=1, dt_factor=5.0,
+         petsc_options={"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10},
+         prefix="fenicsmpm_bench_gmres_"),
+]
+QUICK = [
+    dict(name="explicit-MUSL", integrator="Explicit", scheme="MUSL", cells=164, per_cell=2,
+         steps=10, warmup=2),
+    dict(name="implicit-Newmark", integrator="Newmark", scheme="Newmark", cells=74,
+         per_cell=2, steps=2, warmup=1, dt_factor=5.0),
+]
+
+# targets from the issue (reported, not asserted) and peers for context
+TARGETS = {"explicit_particle_updates_per_s_serial": 5.0e6,
+           "implicit_assembly_over_ksp_max": 1.0}
+PEERS = {"CB-Geo MPM, 1 core (particle updates/s)": 0.50e6}
+
+STAGES = ("locate", "shape", "p2g", "solve", "g2p", "constitutive")
+SUBSTAGES = ("assembly", "ksp")          # parts of "solve" (implicit)
+
+
+def scenes(quick=False, scale=1.0):
+    """The run specifications; `scale` multiplies the particle counts (cells per side by
+    sqrt(scale), at least MIN_CELLS)."""
+    if not (scale > 0):
+        raise ValueError(f"throughput: 'scale' must be > 0, got {scale!r}")
+    out = []
+    for s in (QUICK if quick else FULL):
+        s = dict(s)
+        s["cells"] = max(MIN_CELLS, int(round(s["cells"] * math.sqrt(scale))))
+        out.append(s)
+    return out
+
+
+def scene_config(spec):
+    """The run's config record (h and dt are filled in by build_scene)."""
+    n = spec["cells"]
+    bx, by = n - 2 * MARGIN, n - MARGIN
+    cfg = dict(integrator=spec["integrator"], scheme=spec["scheme"], shape="Q1 (standard MPM)",
+               h=LENGTH / n, dt=None, ppc=spec["per_cell"] ** 2, per_cell=spec["per_cell"],
+               cell_type="quadrilateral", grid_cells=[n, n], block_cells=[bx, by],
+               margin_cells=MARGIN, length=LENGTH, material="LinearElastic", E=E, nu=NU,
+               density=RHO, gravity=[0.0, -GRAVITY], base="fixed (x and y)",
+               warmup_steps=spec["warmup"])
+    if spec["integrator"] == "Explicit":
+        cfg.update(dt_rule="auto", cfl=0.5, flip=1.0)
+    else:
+        cfg.update(dt_rule=f"{spec['dt_factor']:g} * dt_critical", dt_factor=spec["dt_factor"],
+                   beta=0.25, gamma=0.5, petsc_options=spec.get("petsc_options"),
+                   petsc_prefix=spec.get("prefix"))
+    return cfg
+
+
+def build_scene(cfg, comm=None):
+    """The Simulation of a config (collective)."""
+    from mpi4py import MPI
+    from dolfinx import mesh as dmesh
+    import fenicsmpm as fm
+    comm = MPI.COMM_WORLD if comm is None else comm
+    n = cfg["grid_cells"][0]
+    L, h = cfg["length"], cfg["length"] / n
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [L, L]], [n, n],
+                                 dmesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    mat = fm.LinearElastic(E=cfg["E"], nu=cfg["nu"], density=cfg["density"])
+    x0, x1, y1 = MARGIN * h, L - MARGIN * h, L - MARGIN * h
+    pts = fm.Particles.fill(grid, mat, per_cell=cfg["per_cell"],
+                            region=lambda x: (x[:, 0] > x0) & (x[:, 0] < x1) & (x[:, 1] < y1))
+    if cfg["integrator"] == "Explicit":
+        integ, dt = fm.Explicit(cfg["scheme"], flip=cfg["flip"]), "auto"
+    else:
+        kw = {}
+        if cfg.get("petsc_options"):
+            # own prefix: LinearSystem leaves its options in PETSc's global database
+            kw = dict(petsc_options=cfg["petsc_options"], prefix=cfg["petsc_prefix"])
+        integ = fm.Newmark(beta=cfg["beta"], gamma=cfg["gamma"], **kw)
+        dt = cfg["dt_factor"] * grid.h / mat.p_wave_speed      # = dt_factor * sim.dt_critical
+    sim = fm.Simulation(grid, pts, integ, dt=dt, gravity=cfg["gravity"],
+                        cfl=cfg.get("cfl", 0.5))
+    sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
+    cfg["h"], cfg["dt"], cfg["dt_critical"] = grid.h, sim.dt, sim.dt_critical
+    return sim
+
+
+def _global_cells(sim):
+    g = sim.grid
+    return g.comm.allreduce(g.n_owned_cells) if g.comm.size > 1 else g.n_owned_cells
+
+
+def run_scene(spec, comm=None):
+    """Build, warm up, time; returns the run record."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD if comm is None else comm
+    cfg = scene_config(spec)
+    mem = common.MemoryProbe(comm).start()
+    sim = build_scene(cfg, comm)
+    n_part = sim.particles.n_global
+    implicit = not sim.integrator.explicit
+    if implicit:
+        ksp = sim.integrator.system.ksp
+        cfg.update(ksp_type=ksp.getType(), pc_type=ksp.getPC().getType())
+        if cfg["pc_type"] in ("lu", "cholesky"):
+            cfg["factor_solver"] = ksp.getPC().getFactorSolverType() or "petsc"
+    steps, warmup = spec["steps"], spec["warmup"]
+    n_iter0 = None
+    if implicit:
+        # iterations of the measured steps only
+        for _ in range(warmup):
+            sim.step()
+        n_iter0 = len(sim.integrator.iterations)
+        ksp0 = sim.integrator.ksp_iterations
+        warmup_left = 0
+    else:
+        warmup_left = warmup
+    wall, timers = common.time_steps(sim, steps, warmup_left)
+    peak, increase = mem.peak()
+    per_step = wall / steps
+    m = {"particle_updates_per_s": n_part * steps / wall, "wall_per_step_s": per_step}
+    keys = [k for k in timers if implicit or k not in SUBSTAGES]
+    for k in keys:
+        m[f"t_{k}"] = timers[k] / steps
+        m[f"frac_{k}"] = timers[k] / wall
+    top = sum(timers[k] for k in timers if k not in SUBSTAGES)
+    m["t_other"] = (wall - top) / steps
+    m["frac_other"] = (wall - top) / wall
+    if implicit:
+        its = sim.integrator.iterations[n_iter0:]
+        m["assembly_over_ksp"] = timers["assembly"] / timers["ksp"] if timers["ksp"] > 0 else math.inf
+        m["newton_iterations"] = float(np.mean(its))
+        m["ksp_iterations_per_step"] = (sim.integrator.ksp_iterations - ksp0) / steps
+        m["n_dofs"] = sim.integrator.system.A.getSize()[0]
+    m["peak_rss_bytes"] = peak
+    m["mem_bytes_per_particle"] = increase / n_part
+    m["particle_array_bytes_per_particle"] = common.particle_bytes(sim) / n_part
+    rec = common.make_record(spec["name"], cfg, n_part, _global_cells(sim), steps, wall, m)
+    if implicit:
+        sim.integrator.system.destroy()
+    del sim
+    gc.collect()
+    return rec
+
+
+def _stacks(runs):
+    """Exclusive per-stage seconds per step, for the stacked bars (assembly and ksp are taken
+    out of solve; stages added to sim.timers later are drawn before "other")."""
+    extra = sorted({k[2:] for r in runs for k in r["metrics"] if k.startswith("t_")}
+                   - set(STAGES) - set(SUBSTAGES) - {"other"})
+    names = (list(STAGES[:3]) + ["solve (residual)", "assembly", "ksp"] + list(STAGES[4:])
+             + extra + ["other"])
+    stacks = {}
+    for k in names:
+        vals = []
+        for r in runs:
+            m = r["metrics"]
+            if k == "solve (residual)":
+                vals.append(m.get("t_solve", 0.0) - m.get("t_assembly", 0.0) - m.get("t_ksp", 0.0))
+            else:
+                vals.append(m.get(f"t_{k}", 0.0))
+        stacks[k] = vals
+    return stacks
+
+
+def plot(doc, path, comm):
+    runs = doc["runs"]
+    fig, axes = common.new_figure(ncols=2, size=(6.8, 4.8))
+    labels = [f"{r['name']}\n{r['n_particles']:,} p" for r in runs]
+    stacks = _stacks(runs)
+    ann = [f"{r['metrics']['particle_updates_per_s'] / 1e6:.3g} M upd/s" for r in runs]
+    common.stacked_bars(axes[0, 0], labels, stacks, ann, ylabel="time per step [s]",
+                        legend=None)
+    axes[0, 0].set_title("time per step by stage", fontsize=9)
+    per = {k: [1e9 * v / r["n_particles"] for v, r in zip(vals, runs)]
+           for k, vals in stacks.items()}
+    common.stacked_bars(axes[0, 1], labels, per, ylabel="time per particle update [ns]")
+    tgt = 1e9 / TARGETS["explicit_particle_updates_per_s_serial"]
+    axes[0, 1].axhline(tgt, color="k", ls="--", lw=0.8)
+    axes[0, 1].text(-0.45, tgt, "explicit target: 5 M upd/s (200 ns)", fontsize=7,
+                    ha="left", va="bottom")
+    axes[0, 1].set_title("per particle (comparable across sizes)", fontsize=9)
+    quick = " (quick)" if doc.get("quick") else ""
+    return common.save_figure(fig, path, comm,
+                              title=f"fenicsmpm throughput{quick}\n"
+                                    f"{common.machine_title(doc['machine'])}")
+
+
+def print_report(doc, comm):
+    cols = [("run", "name"), ("particles", "n_particles"), ("steps", "steps"),
+            ("wall [s]", "wall_s"),
+            ("updates/s", lambda r: r["metrics"]["particle_updates_per_s"]),
+            ("s/step", lambda r: r["metrics"]["wall_per_step_s"]),
+            ("assembly/ksp", lambda r: r["metrics"].get("assembly_over_ksp")),
+            ("newton its", lambda r: r["metrics"].get("newton_iterations")),
+            ("B/particle", lambda r: r["metrics"]["mem_bytes_per_particle"])]
+    common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
+                       f"{' (quick)' if doc['quick'] else ''}: {doc['machine']['ranks']} rank(s)")
+    stage_cols = [("run", "name")] + [
+        (k, (lambda k: lambda r: r["metrics"].get(f"frac_{k}"))(k))
+        for k in list(STAGES) + list(SUBSTAGES) + ["other"]]
+    common.print_table(doc["runs"], stage_cols, comm, title="fraction of the wall time per stage "
+                       "(assembly and ksp are parts of solve)")
+    for r in doc["runs"]:
+        m = r["metrics"]
+        if r["config"]["integrator"] == "Explicit":
+            t = TARGETS["explicit_particle_updates_per_s_serial"]
+            common.say(comm, f"  {r['name']}: {m['particle_updates_per_s'] / 1e6:.2f} M updates/s"
+                       f" vs target {t / 1e6:.0f} M (serial): "
+                       f"{'met' if m['particle_updates_per_s'] >= t else 'NOT met'}")
+        elif "assembly_over_ksp" in m and m["assembly_over_ksp"] is not None:
+            common.say(comm, f"  {r['name']}: assembly/KSP = {m['assembly_over_ksp']:.3g} vs "
+                       f"target <= 1: {'met' if m['assembly_over_ksp'] <= 1 else 'NOT met'}")
+    for k, v in PEERS.items():
+        common.say(comm, f"  peer: {k} = {v / 1e6:.2f} M")
+
+
+def run(quick=False, out="bench-results", comm=None, scale=1.0, verbose=True):
+    """Run the case, write out/throughput.json and out/throughput.png, print the table.
+    Returns the result dict (on every rank)."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD if comm is None else comm
+    runs = []
+    for spec in scenes(quick, scale):
+        if verbose:
+            common.say(comm, f"[{CASE}] {spec['name']}: {spec['cells']}^2 cells, "
+                       f"{spec['per_cell']}x{spec['per_cell']} ppc, {spec['warmup']} warm-up + "
+                       f"{spec['steps']} steps ...")
+        runs.append(run_scene(spec, comm))
+        if verbose:
+            r = runs[-1]
+            common.say(comm, f"    {r['n_particles']:,} particles, {r['wall_s']:.3g} s, "
+                       f"{r['metrics']['particle_updates_per_s']:.3g} updates/s")
+    doc = common.result(CASE, runs, comm, quick=quick, scale=scale, targets=TARGETS, peers=PEERS)
+    common.write_result(doc, out, comm)
+    plot(doc, os.path.join(out, f"{CASE}.png"), comm)
+    if verbose:
+        print_report(doc, comm)
+    return doc
