@@ -249,8 +249,9 @@ def time_steps(sim, steps, warmup=0):
     """Run `warmup` steps (absorbing JIT compilation), reset sim.timers, then time `steps`
     steps with time.perf_counter between barriers.
 
-    Returns (wall_s, timers): wall_s of the slowest rank, timers = seconds per stage summed
-    over the measured steps and averaged over ranks."""
+    Returns a dict: wall_s (slowest rank), cpu_s (process CPU time, summed over ranks; on a
+    busy machine cpu_s / (wall_s * ranks) < 1 shows how much the run was starved) and
+    timers (seconds per stage summed over the measured steps, averaged over ranks)."""
     comm = sim.comm
     for _ in range(warmup):
         sim.step()
@@ -258,17 +259,20 @@ def time_steps(sim, steps, warmup=0):
         sim.timers[k] = 0.0
     if comm.size > 1:
         comm.barrier()
+    c0 = time.process_time()
     t0 = time.perf_counter()
     for _ in range(steps):
         sim.step()
     wall = time.perf_counter() - t0
+    cpu = time.process_time() - c0
     if comm.size > 1:
         from mpi4py import MPI
         wall = comm.allreduce(wall, op=MPI.MAX)
+        cpu = comm.allreduce(cpu)
         timers = {k: comm.allreduce(v) / comm.size for k, v in sim.timers.items()}
     else:
         timers = dict(sim.timers)
-    return wall, timers
+    return dict(wall_s=wall, cpu_s=cpu, timers=timers)
 
 
 # ---------------------------------------------------------------------------- memory

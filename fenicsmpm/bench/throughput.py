@@ -15,12 +15,15 @@ Runs (full size / --quick):
       iterative solve (the mass term makes the system well conditioned at this dt)
 The warm-up absorbs numba compilation and first-call set-up; sim.timers are zeroed after it.
 
-Metrics per run: particle_updates_per_s = n_particles * steps / wall_s; t_<stage> (seconds
+Metrics per run: particle_updates_per_s = n_particles * steps / wall_s; cpu_s (CPU time of
+the measured steps, all ranks), cpu_utilization = cpu_s / (wall_s * ranks) (< 1: the machine
+was busy with other work) and particle_updates_per_cpu_s; t_<stage> (seconds
 per step, from sim.timers: locate, shape, p2g, solve, g2p, constitutive; implicit also
 assembly and ksp, which are parts of solve) and frac_<stage> (of the wall time per step);
 t_other (wall per step minus the stages: untimed work); implicit: assembly_over_ksp,
-newton_iterations (mean per step), ksp_iterations (per step); memory: peak_rss_bytes,
-mem_bytes_per_particle (peak RSS increase during the run / particles) and
+newton_iterations (mean per step), ksp_iterations_per_step, n_dofs; memory: peak_rss_bytes,
+mem_bytes_per_particle (peak RSS during the run minus RSS before building the scene, over
+particles: everything the run needs, mesh, grid, matrix and factors included) and
 particle_array_bytes_per_particle (per-particle state and work arrays / particles)."""
 import gc
 import math
@@ -151,21 +154,17 @@ def run_scene(spec, comm=None):
         cfg.update(ksp_type=ksp.getType(), pc_type=ksp.getPC().getType())
         if cfg["pc_type"] in ("lu", "cholesky"):
             cfg["factor_solver"] = ksp.getPC().getFactorSolverType() or "petsc"
-    steps, warmup = spec["steps"], spec["warmup"]
-    n_iter0 = None
-    if implicit:
-        # iterations of the measured steps only
-        for _ in range(warmup):
-            sim.step()
-        n_iter0 = len(sim.integrator.iterations)
-        ksp0 = sim.integrator.ksp_iterations
-        warmup_left = 0
-    else:
-        warmup_left = warmup
-    wall, timers = common.time_steps(sim, steps, warmup_left)
+    steps = spec["steps"]
+    for _ in range(spec["warmup"]):
+        sim.step()
+    if implicit:        # count the iterations of the measured steps only
+        n_iter0, ksp0 = len(sim.integrator.iterations), sim.integrator.ksp_iterations
+    timing = common.time_steps(sim, steps)
+    wall, timers = timing["wall_s"], timing["timers"]
     peak, increase = mem.peak()
-    per_step = wall / steps
-    m = {"particle_updates_per_s": n_part * steps / wall, "wall_per_step_s": per_step}
+    m = {"particle_updates_per_s": n_part * steps / wall, "wall_per_step_s": wall / steps,
+         "cpu_s": timing["cpu_s"], "cpu_utilization": timing["cpu_s"] / (wall * comm.size),
+         "particle_updates_per_cpu_s": n_part * steps / timing["cpu_s"]}
     keys = [k for k in timers if implicit or k not in SUBSTAGES]
     for k in keys:
         m[f"t_{k}"] = timers[k] / steps
@@ -175,7 +174,8 @@ def run_scene(spec, comm=None):
     m["frac_other"] = (wall - top) / wall
     if implicit:
         its = sim.integrator.iterations[n_iter0:]
-        m["assembly_over_ksp"] = timers["assembly"] / timers["ksp"] if timers["ksp"] > 0 else math.inf
+        if timers["ksp"] > 0:
+            m["assembly_over_ksp"] = timers["assembly"] / timers["ksp"]
         m["newton_iterations"] = float(np.mean(its))
         m["ksp_iterations_per_step"] = (sim.integrator.ksp_iterations - ksp0) / steps
         m["n_dofs"] = sim.integrator.system.A.getSize()[0]
@@ -238,6 +238,7 @@ def print_report(doc, comm):
             ("wall [s]", "wall_s"),
             ("updates/s", lambda r: r["metrics"]["particle_updates_per_s"]),
             ("s/step", lambda r: r["metrics"]["wall_per_step_s"]),
+            ("cpu/wall", lambda r: r["metrics"]["cpu_utilization"]),
             ("assembly/ksp", lambda r: r["metrics"].get("assembly_over_ksp")),
             ("newton its", lambda r: r["metrics"].get("newton_iterations")),
             ("B/particle", lambda r: r["metrics"]["mem_bytes_per_particle"])]
