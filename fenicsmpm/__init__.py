@@ -13,5 +13,25 @@ from .integrators import Explicit, Newmark, QuasiStatic
 from .simulation import Simulation, Probe, Output
 
 __version__ = "0.1.0"
+
+
+def _abort_all_ranks_on_uncaught_exception():
+    """Under MPI, an exception left uncaught on one rank prints its traceback and aborts every
+    rank (MPI_Abort) instead of leaving the others waiting in a collective."""
+    import sys
+    from mpi4py import MPI
+    if MPI.COMM_WORLD.size == 1:
+        return
+    previous = sys.excepthook
+
+    def hook(kind, value, tb):
+        previous(kind, value, tb)
+        sys.stderr.flush()
+        MPI.COMM_WORLD.Abort(1)
+
+    sys.excepthook = hook
+
+
+_abort_all_ranks_on_uncaught_exception()
 __all__ = ["Grid", "Particles", "LinearElastic", "NeoHookean", "Explicit", "Newmark",
            "QuasiStatic", "Simulation", "Probe", "Output"]

@@ -1,10 +1,12 @@
 """Particle ownership under MPI: each rank holds the particles inside its owned cells.
 
-After particles move, the ones located in a ghost cell are sent to that cell's owner
-(neighbour information from the cell index map). Particles found in no local cell, owned or
-ghost, take the fallback: their positions are shared with every rank, and the rank that owns
-a cell containing the point claims it. Particles no rank claims have left the global domain
-and are reported, never dropped silently. On one rank this module is never called."""
+After particles move, the ones located in a ghost cell are sent to that cell's owner over a
+neighbourhood communicator (MPI distributed graph) whose edges are the ghost-cell owners.
+Particles found in no local cell, owned or ghost, take the fallback, which one global
+reduction per step detects: their positions are shared with every rank, the rank owning a
+cell containing the point claims it, and a global all-to-all moves them. Particles no rank
+claims have left the global domain and are reported, never dropped silently. On one rank
+this module is never called."""
 import numpy as np
 
 from .particles import FIELDS
@@ -14,6 +16,21 @@ def _pack(p, sel):
     out = {name: getattr(p, name)[sel] for name in FIELDS}
     out["state"] = p.state[sel]
     return out
+
+
+def neighbourhood(grid):
+    """Distributed-graph communicator over the ranks sharing ghost cells with this one
+    (symmetric: ranks owning my ghosts, plus ranks having my cells as ghosts). Cached."""
+    nbr = getattr(grid, "_neighbourhood", None)
+    if nbr is None:
+        comm = grid.comm
+        owners = grid.mesh.topology.index_map(grid.mesh.topology.dim).owners
+        mine = set(int(r) for r in np.unique(owners))
+        everyone = comm.allgather(sorted(mine))
+        ranks = sorted(mine | {r for r, lst in enumerate(everyone) if comm.rank in lst})
+        nbr = comm.Create_dist_graph_adjacent(ranks, ranks, reorder=False)
+        grid._neighbourhood = (nbr, ranks)
+    return grid._neighbourhood
 
 
 def migrate(p):
@@ -31,21 +48,26 @@ def migrate(p):
     dest = np.full(len(p), rank, dtype=np.int64)
     ghost = cells >= n_owned
     dest[ghost] = ghost_owner[cells[ghost] - n_owned]
-    # fallback for particles in no local cell: every rank tries to claim them
     lost = np.flatnonzero(cells < 0)
-    all_lost = comm.allgather(p.x[lost])
-    if any(len(xs) for xs in all_lost):
+    far = np.zeros(len(p), dtype=bool)          # destinations resolved by the global fallback
+    if comm.allreduce(len(lost)):
+        all_lost = comm.allgather(p.x[lost])
         claims = []
         for xs in all_lost:
             c, _ = grid.locate(xs) if len(xs) else (np.zeros(0, np.int32), None)
             claims.append(np.where((c >= 0) & (c < n_owned), rank, size))
         dest[lost] = np.min([cl[rank] for cl in comm.allgather(claims)], axis=0)
-        dest[dest >= size] = rank                    # unclaimed: outside the global domain
-    send = [_pack(p, np.flatnonzero(dest == r)) if r != rank else None for r in range(size)]
-    recv = comm.alltoall(send)
+        dest[dest >= size] = rank                # unclaimed: outside the global domain
+        far[lost] = dest[lost] != rank
+        recv_far = comm.alltoall([_pack(p, np.flatnonzero(far & (dest == r))) if r != rank
+                                  else None for r in range(size)])
+    else:
+        recv_far = []
+    nbr, ranks = neighbourhood(grid)
+    recv = nbr.neighbor_alltoall([_pack(p, np.flatnonzero(~far & (dest == r))) for r in ranks])
     stay = np.flatnonzero(dest == rank)
     n_stay = len(stay)
-    parts = [_pack(p, stay)] + [d for r, d in enumerate(recv) if r != rank]
+    parts = [_pack(p, stay)] + [d for d in list(recv) + list(recv_far) if d is not None]
     for name in list(FIELDS) + ["state"]:
         setattr(p, name, np.ascontiguousarray(np.concatenate([d[name] for d in parts])))
     if len(p) > n_stay:                              # locate arrivals in this rank's numbering
@@ -54,6 +76,8 @@ def migrate(p):
         p.xi[n_stay:] = xi
     p.version += 1
     gone = p.cell < 0
+    if not comm.allreduce(int(gone.sum())):
+        return np.zeros(0, dtype=np.int64), np.zeros((0, grid.gdim))
     ids = np.concatenate(comm.allgather(p.id[gone]))
     xs = np.concatenate(comm.allgather(p.x[gone]))
     return ids, xs

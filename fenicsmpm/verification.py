@@ -64,3 +64,26 @@ def self_weight_column(integrator, n_cells=10, per_cell=2, height=10.0, E=1e8, n
         displacement_y=lambda y: -density * g * (height * y - 0.5 * y ** 2) / M,
         top_settlement=density * g * height ** 2 / (2 * M))
     return sim, exact
+
+
+def colliding_discs(integrator, n_cells=20, per_cell=2, cfl=0.5, speed=0.1,
+                    cell_type=dmesh.CellType.quadrilateral, comm=MPI.COMM_WORLD):
+    """L2: two elastic discs (radius 0.2, centres (0.2, 0.2) and (0.8, 0.8)) moving towards each
+    other with velocities +-(speed, speed) in a unit square; E = 1000, nu = 0.3, rho = 1000
+    (Sulsky et al. 1995). No boundary conditions, no gravity: total momentum stays zero, and
+    kinetic energy turns into strain energy during the impact (which starts at t ~ 1.59 s)."""
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells], cell_type)
+    grid = Grid(msh)
+    mat = LinearElastic(E=1000.0, nu=0.3, density=1000.0)
+    centres = np.array([[0.2, 0.2], [0.8, 0.8]])
+
+    def disc(k):
+        return lambda x: np.linalg.norm(x - centres[k], axis=1) < 0.2
+
+    v = np.array([speed, speed])
+    pts = (Particles.fill(grid, mat, per_cell=per_cell, region=disc(0), velocity=v)
+           + Particles.fill(grid, mat, per_cell=per_cell, region=disc(1), velocity=-v))
+    dt = cfl * grid.h / mat.p_wave_speed if integrator.explicit else 2.0 * grid.h / mat.p_wave_speed
+    sim = Simulation(grid, pts, integrator, dt=dt)
+    contact = (np.linalg.norm(centres[1] - centres[0]) - 0.4) / (2 * speed * np.sqrt(2))
+    return sim, dict(contact_time=contact, kinetic_energy=0.5 * 1000.0 * np.pi * 0.2 ** 2 * 2 * 2 * speed ** 2)

@@ -47,7 +47,9 @@ class _Newton:
         m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static).
 
         Converged when |R| <= rtol |f|, or when the last correction is below utol |du| with
-        |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|)."""
+        |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|, |R_0|);
+        the initial residual R_0 carries the inertial load when f_ext and f_int vanish
+        (rigid motion)."""
         p, grid, T, sys = sim.particles, sim.grid, sim.timers, self.system
         n = len(p)
         d = sim.gdim
@@ -74,7 +76,9 @@ class _Newton:
             R = f_ext + fint - inertia(du)
             R[cmask] = 0.0
             rnorm = self._norm(sim, R)
-            scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), 1e-300)
+            if it == 0:
+                r0 = rnorm
+            scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), r0, 1e-300)
             T["solve"] += time.perf_counter() - t1
             if not np.isfinite(rnorm):
                 raise FloatingPointError(f"step {sim.step_count}, t = {sim.t:.6g}: non-finite "

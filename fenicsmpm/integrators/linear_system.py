@@ -48,15 +48,23 @@ class LinearSystem:
         self.ksp = PETSc.KSP().create(grid.comm)
         self.ksp.setOperators(self.A)
         self.ksp.setOptionsPrefix(prefix)
+        # options: command line (-fenicsmpm_...) < built-in defaults for unset keys < the
+        # petsc_options dict; what this object put into the options database is taken out
+        # again after setFromOptions, so it cannot leak into the next simulation
         opts = PETSc.Options()
-        defaults = {"ksp_type": "preonly", "pc_type": "lu"}
+        merged = {"ksp_type": "preonly", "pc_type": "lu"}
         if grid.comm.size > 1:
-            defaults["pc_factor_mat_solver_type"] = "mumps"
-        defaults.update(petsc_options or {})
-        for k, v in defaults.items():
-            if petsc_options and k in petsc_options or not opts.hasName(prefix + k):
-                opts[prefix + k] = v
+            merged["pc_factor_mat_solver_type"] = "mumps"
+        merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
+        merged.update(petsc_options or {})
+        saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
+        for k, v in merged.items():
+            opts[prefix + k] = v
         self.ksp.setFromOptions()
+        for k in merged:
+            opts.delValue(prefix + k)
+            if k in saved:
+                opts[prefix + k] = saved[k]
         self.iterations = 0
 
     def plan(self, nodes):
