@@ -32,11 +32,9 @@ class Explicit:
     def setup(self, sim):
         pass
 
-    def _grid_velocity(self, sim, momentum, m, active):
-        v = np.zeros_like(momentum)
-        v[active] = momentum[active] / m[active, None]
-        v[sim.fixed] = 0.0
-        return v
+    def _grid_velocity(self, momentum, inv_m, free):
+        """v_i = (m v)_i / m_i on active nodes, 0 on inactive nodes and fixed components."""
+        return momentum * inv_m[:, None] * free
 
     def _stress_update(self, sim, v_grid, dt):
         dF = sim._dF
@@ -51,7 +49,9 @@ class Explicit:
         m, mv = sim.nodal_mass_momentum()
         grid.accumulate(m, mv)
         active = sim.active_mask(m)
-        v0 = self._grid_velocity(sim, mv, m, active)
+        inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
+        free = ~sim.fixed
+        v0 = self._grid_velocity(mv, inv_m, free)
         T["p2g"] += time.perf_counter() - t0
         if self.scheme == "USF":
             self._stress_update(sim, v0, dt)
@@ -61,9 +61,7 @@ class Explicit:
         grid.accumulate(f)
         f += sim.external_force(sim.t, m)
         t1 = time.perf_counter()
-        v1 = v0.copy()
-        v1[active] += dt * f[active] / m[active, None]
-        v1[sim.fixed] = 0.0
+        v1 = v0 + dt * f * inv_m[:, None] * free
         t2 = time.perf_counter()
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
@@ -73,7 +71,7 @@ class Explicit:
         if self.scheme == "MUSL":
             mv2 = sim.nodal_weighted(p.v)
             grid.accumulate(mv2)
-            v1 = self._grid_velocity(sim, mv2, m, active)
+            v1 = self._grid_velocity(mv2, inv_m, free)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             self._stress_update(sim, v1, dt)
