@@ -76,7 +76,9 @@ def machine_title(machine):
     v = machine["versions"]
     return (f"{machine['cpu']}, {machine['cores']} cores, {machine['ranks']} rank(s) | "
             f"dolfinx {v['dolfinx']}, PETSc {v['petsc']}, numba {v['numba']}, "
-            f"numpy {v['numpy']}, Python {v['python']} | {machine['timestamp']}")
+            f"numpy {v['numpy']}, Python {v['python']} | {machine['timestamp']}"
+            + (f", load {machine['load_average_1min']:g}"
+               if machine.get("load_average_1min") is not None else ""))
 
 
 # ---------------------------------------------------------------------------- records
