@@ -50,7 +50,10 @@ def migrate(p):
     dest[ghost] = ghost_owner[cells[ghost] - n_owned]
     lost = np.flatnonzero(cells < 0)
     far = np.zeros(len(p), dtype=bool)          # destinations resolved by the global fallback
-    if comm.allreduce(len(lost)):
+    n_lost, n_ghost = comm.allreduce(np.array([len(lost), int(np.count_nonzero(ghost))]))
+    if n_lost == 0 and n_ghost == 0:
+        return _nothing(grid)                    # the usual step: one small reduction
+    if n_lost:
         all_lost = comm.allgather(p.x[lost])
         claims = []
         for xs in all_lost:
@@ -64,7 +67,8 @@ def migrate(p):
     else:
         recv_far = []
     nbr, ranks = neighbourhood(grid)
-    recv = nbr.neighbor_alltoall([_pack(p, np.flatnonzero(~far & (dest == r))) for r in ranks])
+    moving = ~far & (dest != rank)
+    recv = nbr.neighbor_alltoall([_pack(p, np.flatnonzero(moving & (dest == r))) for r in ranks])
     stay = np.flatnonzero(dest == rank)
     n_stay = len(stay)
     parts = [_pack(p, stay)] + [d for d in list(recv) + list(recv_far) if d is not None]
@@ -75,9 +79,12 @@ def migrate(p):
         p.cell[n_stay:] = c
         p.xi[n_stay:] = xi
     p.version += 1
-    gone = p.cell < 0
-    if not comm.allreduce(int(gone.sum())):
-        return np.zeros(0, dtype=np.int64), np.zeros((0, grid.gdim))
-    ids = np.concatenate(comm.allgather(p.id[gone]))
-    xs = np.concatenate(comm.allgather(p.x[gone]))
-    return ids, xs
+    if n_lost == 0:
+        return _nothing(grid)
+    gone = p.cell < 0                            # unclaimed by every rank in the fallback
+    return (np.concatenate(comm.allgather(p.id[gone])),
+            np.concatenate(comm.allgather(p.x[gone])))
+
+
+def _nothing(grid):
+    return np.zeros(0, dtype=np.int64), np.zeros((0, grid.gdim))
