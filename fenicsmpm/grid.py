@@ -165,28 +165,25 @@ class Grid:
                          xi, inside)
         lost = np.flatnonzero(~inside)
         if len(lost):
-            found = self._tree_locate(x[lost])
+            found, xl = self._tree_locate(x[lost])
             out[lost] = found
-            xl = np.zeros((len(lost), self.gdim))
-            ok = np.zeros(len(lost), dtype=np.bool_)
-            ks.pull_back(self.kind, x[lost], found, self.cell_nodes, self.node_x,
-                         self.affine_Jinv, xl, ok)
             xi[lost] = xl
-            out[lost[~ok]] = -1
         return out, xi
 
     def _tree_locate(self, x):
+        """Bounding-box-tree candidates, confirmed by the exact pull-back (not by dolfinx's
+        convex-hull test, which is wrong for the curved faces of non-affine hexahedra)."""
         if self._tree is None:
             self._tree = geometry.BoundingBoxTree(self.mesh, self.mesh.topology.dim)
         pts = np.zeros((len(x), 3))
         pts[:, : self.gdim] = x
         cand = geometry.compute_collisions(self._tree, pts)
-        coll = geometry.compute_colliding_cells(self.mesh, cand, pts)
-        off = coll.offsets
-        has = off[1:] > off[:-1]
-        cells = np.full(len(x), -1, dtype=np.int32)
-        cells[has] = coll.array[off[:-1][has]]
-        return cells
+        cells = np.empty(len(x), dtype=np.int32)
+        xi = np.zeros((len(x), self.gdim))
+        ks.first_inside(self.kind, np.ascontiguousarray(x), cand.offsets.astype(np.int64),
+                        cand.array.astype(np.int32), self.cell_nodes, self.node_x,
+                        self.affine_Jinv, cells, xi)
+        return cells, xi
 
     # ------------------------------------------------------------------ nodes
     def nodes_where(self, where):

@@ -11,7 +11,6 @@ from .boundaries import Traction, TractionForms, fixed_dofs
 from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
-from .materials import strain_energy_increment
 
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
                 "acceleration": "a"}
@@ -54,6 +53,7 @@ class Simulation:
         self.timers = dict(locate=0.0, shape=0.0, p2g=0.0, solve=0.0, g2p=0.0, constitutive=0.0,
                            assembly=0.0, ksp=0.0)
         self._n_alloc = -1
+        self._all = np.zeros(0, dtype=np.int64)
         integrator.setup(self)
 
     def _check_dt(self, dt):
@@ -110,7 +110,7 @@ class Simulation:
             self._dF = np.empty((n, 3, 3))
             self._sigma_new = np.empty((n, 3, 3))
             self._n_alloc = n
-        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
+        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad, g.affine_Jinv,
                      self.nodes, self.N, self.dN)
         self.timers["locate"] += t1 - t0
         self.timers["shape"] += time.perf_counter() - t1
@@ -164,7 +164,9 @@ class Simulation:
         """(material, particle indices) per material present."""
         p = self.particles
         if len(p.materials) == 1:
-            return [(p.materials[0], np.arange(len(p), dtype=np.int64))]
+            if len(self._all) != len(p):
+                self._all = np.arange(len(p), dtype=np.int64)
+            return [(p.materials[0], self._all)]
         return [(m, np.flatnonzero(p.material_id == k)) for k, m in enumerate(p.materials)]
 
     def trial_stress(self, dF):
@@ -180,12 +182,7 @@ class Simulation:
         """Accept dF and the trial stress: update F, V, stress and the stress work."""
         p = self.particles
         t0 = time.perf_counter()
-        idx = np.arange(len(p), dtype=np.int64)
-        V_new = np.empty_like(p.V)
-        kt.scaled_volume(idx, dF, p.V, V_new)
-        strain_energy_increment(idx, dF, p.stress, self._sigma_new, p.V, V_new, p.work)
-        kt.update_deformation(idx, dF, p.F, p.stress, self._sigma_new)
-        p.V = V_new
+        kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work)
         self.timers["constitutive"] += time.perf_counter() - t0
 
     def energy(self):

@@ -57,7 +57,9 @@ class _Newton:
         constrained = (sim.fixed | ~sim.nodal["active"][:, None]).ravel()
         cmask = constrained.reshape(-1, d)
         du = np.zeros((grid.n_nodes, d))
+        t0 = time.perf_counter()
         plan = sys.plan(sim.nodes)
+        T["assembly"] += time.perf_counter() - t0
         P = np.empty((n, 3, 3))
         dsig = np.empty((n, 3, 3, 3, 3))
         A4 = np.empty((n, 3, 3, 3, 3))
@@ -65,10 +67,9 @@ class _Newton:
         fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
         dnorm = np.inf
         for it in range(self.max_iter + 1):
-            t0 = time.perf_counter()
+            t1 = time.perf_counter()
             kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, du, 1.0, sim._dF)
             sig = sim.trial_stress(sim._dF)
-            t1 = time.perf_counter()
             first_piola(idx, sim._dF, sig, P)
             fint = np.zeros_like(du)
             sim.internal_force(P, fint)          # -f_int (local)

@@ -76,7 +76,7 @@ class LinearSystem:
     def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained):
         """Fill K = sum_p V_p B^T A_p B + diag(diag_add) with unit rows on constrained dofs."""
         self.data[:] = 0.0
-        kt.assemble_stiffness(nodes, dN, V, A4, plan, self.nodeptr, constrained, self.data)
+        kt.assemble_stiffness(self.grid.D, nodes, dN, V, A4, plan, self.nodeptr, constrained, self.data)
         own = self.n_owned_dofs
         d = self.diag[:own]
         self.data[d] += np.where(constrained[:own], 1.0, diag_add[:own])

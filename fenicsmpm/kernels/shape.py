@@ -61,11 +61,13 @@ def _inv_small(J, d, Jinv):
 
 @njit(cache=True)
 def _pull_back_one(kind, c, x, cell_nodes, node_x, affine_Jinv, xi, N, dN, J, Jinv, r):
-    """Reference coordinates xi of point x in cell c.
+    """Reference coordinates xi of point x in cell c; returns True if they are trustworthy.
 
     Affine cells (all simplices; parallelogram quads/hexes when affine_Jinv has one entry
-    per cell): xi = J^-1 (x - x_0). Other Q1 cells: Newton on the multilinear map, with the
-    scratch arrays N, dN, J, Jinv, r supplied by the caller (no allocation per point)."""
+    per cell): xi = J^-1 (x - x_0), always exact. Other Q1 cells: Newton on the multilinear
+    map (steps clipped to the reference-cell size, at most 40 iterations), converged when
+    |x(xi) - x| <= 1e-13 times the cell's size (1e-10 if round-off stalls it); the scratch arrays N, dN, J, Jinv, r come
+    from the caller (no allocation per point)."""
     d = x.shape[0]
     n0 = cell_nodes[c, 0]
     if kind == SIMPLEX or affine_Jinv.shape[0] > 0:
@@ -74,12 +76,17 @@ def _pull_back_one(kind, c, x, cell_nodes, node_x, affine_Jinv, xi, N, dN, J, Ji
             for j in range(d):
                 s += affine_Jinv[c, i, j] * (x[j] - node_x[n0, j])
             xi[i] = s
-        return
+        return True
     nv = 1 << d
+    size = 0.0
+    for a in range(1, nv):
+        for i in range(d):
+            size = max(size, abs(node_x[cell_nodes[c, a], i] - node_x[n0, i]))
     for k in range(d):
         xi[k] = 0.5
-    for it in range(20):
+    for it in range(40):
         _q1_basis(xi, d, N, dN)
+        res = 0.0
         for i in range(d):
             r[i] = -x[i]
             for j in range(d):
@@ -90,16 +97,19 @@ def _pull_back_one(kind, c, x, cell_nodes, node_x, affine_Jinv, xi, N, dN, J, Ji
                 r[i] += N[a] * node_x[na, i]
                 for j in range(d):
                     J[i, j] += node_x[na, i] * dN[a, j]
-        _inv_small(J, d, Jinv)
-        step = 0.0
+        for i in range(d):
+            res = max(res, abs(r[i]))
+        if res <= 1e-13 * size:
+            return True
+        det = _inv_small(J, d, Jinv)
+        if det == 0.0 or not np.isfinite(det):
+            return False
         for i in range(d):
             s = 0.0
             for j in range(d):
                 s += Jinv[i, j] * r[j]
-            xi[i] -= s
-            step += abs(s)
-        if step < 1e-13:
-            break
+            xi[i] -= min(max(s, -1.0), 1.0)
+    return res <= 1e-10 * size          # round-off floor reached: accept if close enough
 
 
 @njit(cache=True)
@@ -132,8 +142,8 @@ def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_ou
         if c < 0:
             inside_out[p] = False
             continue
-        _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
-        inside_out[p] = _inside(kind, xi_out[p], INSIDE_TOL)
+        ok = _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
+        inside_out[p] = ok and _inside(kind, xi_out[p], INSIDE_TOL)
 
 
 @njit(cache=True)
@@ -165,22 +175,36 @@ def locate_structured(kind, x, origin, spacing, nbox, box_cells, cell_nodes, nod
         cells_out[p] = -1
         if not ok:
             continue
+        if kind == TENSOR and affine_Jinv.shape[0] > 0:
+            # one parallelogram cell per box: xi = J^-1 (x - x_0), no search, no Newton
+            c = box_cells[flat, 0]
+            n0 = cell_nodes[c, 0]
+            for i in range(d):
+                s = 0.0
+                for j in range(d):
+                    s += affine_Jinv[c, i, j] * (x[p, j] - node_x[n0, j])
+                xi_out[p, i] = min(max(s, 0.0), 1.0)
+            cells_out[p] = c
+            continue
         for j in range(box_cells.shape[1]):
             c = box_cells[flat, j]
             if c < 0:
                 break
-            _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
-            if _inside(kind, xi_out[p], 1e-9):
+            ok = _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
+            if ok and _inside(kind, xi_out[p], 1e-9):
                 cells_out[p] = c
                 break
 
 
 @njit(cache=True)
-def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, nodes_out, N_out, dN_out):
+def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
+              nodes_out, N_out, dN_out):
     """Standard MPM shape functions: the Lagrange basis of the particle's cell at the particle.
 
     nodes_out[p, a] = node index, N_out[p, a] = N_a(x_p), dN_out[p, a, :] = grad N_a(x_p).
-    D: tuple of length gdim (compile-time dimension)."""
+    D: tuple of length gdim (compile-time dimension). Simplices use their constant gradients;
+    Q1 cells use the per-cell inverse Jacobian when they are parallelograms (affine_Jinv with
+    one entry per cell), else the Jacobian at the point."""
     d = len(D)
     nv = cell_nodes.shape[1]
     Nq = np.empty(nv)
@@ -202,15 +226,20 @@ def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, nodes_out, N
                     dN_out[p, a, k] = simplex_grad[c, a, k]
             continue
         _q1_basis(xi[p], d, Nq, dNq)
-        for i in range(d):
-            for j in range(d):
-                J[i, j] = 0.0
-        for a in range(nv):
-            na = cell_nodes[c, a]
+        if affine_Jinv.shape[0] > 0:
             for i in range(d):
                 for j in range(d):
-                    J[i, j] += node_x[na, i] * dNq[a, j]
-        _inv_small(J, d, Jinv)
+                    Jinv[i, j] = affine_Jinv[c, i, j]
+        else:
+            for i in range(d):
+                for j in range(d):
+                    J[i, j] = 0.0
+            for a in range(nv):
+                na = cell_nodes[c, a]
+                for i in range(d):
+                    for j in range(d):
+                        J[i, j] += node_x[na, i] * dNq[a, j]
+            _inv_small(J, d, Jinv)
         for a in range(nv):
             N_out[p, a] = Nq[a]
             for k in range(d):
@@ -256,3 +285,20 @@ def reference_points_to_physical(kind, cells, xi, cell_nodes, node_x, x_out, det
                 for j in range(d):
                     J[i, j] += node_x[na, i] * dNq[a, j]
         detJ_out[p] = abs(_inv_small(J, d, Jinv))
+
+
+@njit(cache=True)
+def first_inside(kind, x, offsets, candidates, cell_nodes, node_x, affine_Jinv, cells_out, xi_out):
+    """For each point p, the first candidate cell (candidates[offsets[p]:offsets[p+1]]) that
+    contains it according to the exact pull-back; -1 if none does."""
+    d = x.shape[1]
+    nv = cell_nodes.shape[1]
+    N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
+    for p in range(x.shape[0]):
+        cells_out[p] = -1
+        for q in range(offsets[p], offsets[p + 1]):
+            c = candidates[q]
+            ok = _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
+            if ok and _inside(kind, xi_out[p], INSIDE_TOL):
+                cells_out[p] = c
+                break

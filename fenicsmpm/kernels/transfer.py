@@ -11,7 +11,7 @@ Every grid integral is a particle sum with weight V_p (DESIGN.md):
 import numpy as np
 from numba import njit
 
-from ..materials.piola import det3
+from ..materials.piola import det3, work_increment
 
 
 @njit(cache=True)
@@ -120,19 +120,14 @@ def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
 
 
 @njit(cache=True)
-def scaled_volume(idx, dF, V, V_out):
-    """V_out = det(dF) V for particles in idx."""
-    for q in range(idx.shape[0]):
-        p = idx[q]
-        V_out[p] = det3(dF[p]) * V[p]
-
-
-@njit(cache=True)
-def update_deformation(idx, dF, F, sigma, sigma_new):
-    """Commit a step: F <- dF F, sigma <- sigma_new (for particles in idx)."""
+def commit_step(dF, F, V, sigma, sigma_new, work):
+    """Accept a step for every particle, in one pass: work += trapezoidal stress work,
+    V <- det(dF) V, F <- dF F, sigma <- sigma_new."""
     tmp = np.empty((3, 3))
-    for q in range(idx.shape[0]):
-        p = idx[q]
+    for p in range(dF.shape[0]):
+        V_new = det3(dF[p]) * V[p]
+        work[p] += work_increment(dF[p], sigma[p], sigma_new[p], V[p], V_new)
+        V[p] = V_new
         for i in range(3):
             for j in range(3):
                 tmp[i, j] = dF[p, i, 0] * F[p, 0, j] + dF[p, i, 1] * F[p, 1, j] + dF[p, i, 2] * F[p, 2, j]
@@ -203,10 +198,10 @@ def diagonal_slots(nodeptr, adj, bs):
 
 
 @njit(cache=True)
-def assemble_stiffness(nodes, dN, V, A, plan, nodeptr, constrained, data):
+def assemble_stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, data):
     """data += sum_p V_p grad N_ia,J A_p[r, J, c, L] grad N_jb,L (particle quadrature of the
     updated-Lagrangian tangent), skipping constrained rows and columns."""
-    d = dN.shape[2]
+    d = len(D)
     for p in range(nodes.shape[0]):
         for a in range(nodes.shape[1]):
             i = nodes[p, a]

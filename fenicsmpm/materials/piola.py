@@ -102,24 +102,26 @@ def first_piola_tangent(idx, dF, sigma, dsig, A):
 
 
 @numba.njit(cache=True)
-def strain_energy_increment(idx, dF, sigma_old, sigma_new, volume_old, volume_new, w):
-    """Trapezoidal strain-work increment, accumulated into ``w``.
+def work_increment(dF, sigma_old, sigma_new, volume_old, volume_new):
+    """1/2 (sigma_old : eps V_old + sigma_new : eps V_new), eps = sym(dF - I), for one
+    particle (3x3 arrays): the trapezoidal stress work of a step (Belytschko, Liu & Moran,
+    *Nonlinear FE for Continua and Structures*, sec. 6.2.6 energy balance)."""
+    so = 0.0
+    sn = 0.0
+    for i in range(3):
+        for j in range(3):
+            e = 0.5 * (dF[i, j] + dF[j, i])
+            if i == j:
+                e -= 1.0
+            so += sigma_old[i, j] * e
+            sn += sigma_new[i, j] * e
+    return 0.5 * (so * volume_old + sn * volume_new)
 
-    w[p] += 1/2 (sigma_old : eps V_old + sigma_new : eps V_new),
-    eps = sym(dF - I)  (trapezoidal rule for the stress power integral
-    int sigma : d dot V dt, cf. Belytschko, Liu & Moran, *Nonlinear FE for
-    Continua and Structures*, sec. 6.2.6 energy balance).
-    ``volume_old``/``volume_new``/``w`` have shape (n,).
-    """
+
+@numba.njit(cache=True)
+def strain_energy_increment(idx, dF, sigma_old, sigma_new, volume_old, volume_new, w):
+    """Trapezoidal strain-work increment, accumulated into ``w`` (see work_increment).
+    ``volume_old``/``volume_new``/``w`` have shape (n,)."""
     for q in range(idx.shape[0]):
         p = idx[q]
-        so = 0.0
-        sn = 0.0
-        for i in range(3):
-            for j in range(3):
-                e = 0.5 * (dF[p, i, j] + dF[p, j, i])
-                if i == j:
-                    e -= 1.0
-                so += sigma_old[p, i, j] * e
-                sn += sigma_new[p, i, j] * e
-        w[p] += 0.5 * (so * volume_old[p] + sn * volume_new[p])
+        w[p] += work_increment(dF[p], sigma_old[p], sigma_new[p], volume_old[p], volume_new[p])
