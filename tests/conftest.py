@@ -1,0 +1,66 @@
+"""Shared fixtures for the fenicsmpm test suite (serial and `mpirun -n 2`).
+
+Every test runs the same code path on every rank: global quantities are reduced first
+(`Particles.total`, `Probe.data()`, `comm.allreduce`) and only then asserted, so a failing
+assertion fails on all ranks together and never leaves a rank waiting in a collective."""
+import shutil
+import tempfile
+
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+
+@pytest.fixture(scope="session")
+def comm():
+    """The world communicator."""
+    return MPI.COMM_WORLD
+
+
+@pytest.fixture
+def shared_tmp_path(comm):
+    """One temporary directory shared by all ranks: created on rank 0, broadcast, removed
+    after the test (once every rank is done with it)."""
+    path = tempfile.mkdtemp(prefix="fenicsmpm_test_") if comm.rank == 0 else None
+    path = comm.bcast(path, root=0)
+    yield path
+    comm.barrier()
+    if comm.rank == 0:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture
+def rng(comm):
+    """A random generator seeded differently on each rank (reproducible)."""
+    return np.random.default_rng(20240611 + 7919 * comm.rank)
+
+
+
+def _coordinate_hash(x, salt):
+    """Deterministic pseudo-random numbers in [-0.5, 0.5) computed from coordinates, so a
+    vertex shared by two ranks (owned on one, ghost on the other) moves identically."""
+    w = np.array([12.9898, 78.233, 37.719]) * (1.0 + 0.1372 * salt)
+    s = np.sin(x @ w + 3.1 * salt) * 43758.5453
+    return s - np.floor(s) - 0.5
+
+
+def distort_interior(msh, amplitude):
+    """Move every interior vertex of `msh` (in place, before a Grid is built on it) by a
+    pseudo-random offset of up to `amplitude` per component; boundary vertices stay, so
+    the domain is unchanged. Returns the number of moved vertices (global)."""
+    gx = msh.geometry.x
+    d = msh.geometry.dim
+    lo, hi = gx[:, :d].min(axis=0), gx[:, :d].max(axis=0)
+    lo = np.min(msh.comm.allgather(lo), axis=0)
+    hi = np.max(msh.comm.allgather(hi), axis=0)
+    x0 = gx.copy()
+    interior = np.all((x0[:, :d] > lo + 1e-12) & (x0[:, :d] < hi - 1e-12), axis=1)
+    for k in range(d):
+        gx[interior, k] += amplitude * 2.0 * _coordinate_hash(x0[interior], k)
+    return msh.comm.allreduce(int(np.count_nonzero(interior)))
+
+
+@pytest.fixture(scope="session")
+def distort():
+    """The distort_interior(msh, amplitude) helper."""
+    return distort_interior

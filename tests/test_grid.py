@@ -1,0 +1,105 @@
+"""Grid geometry data and Particles.fill on dolfinx meshes.
+
+- grid.h: the cell size on a structured quadrilateral/hexahedral mesh (the shortest edge
+  for rectangular cells), and the smallest altitude on simplex meshes (right triangles:
+  a b / sqrt(a^2 + b^2); tetrahedra: min 3 |K| / |face| computed from the vertices).
+- grid.structured: True on create_rectangle (quads, triangles) and create_box (hexes, tets).
+- Particles.fill: the particle volumes sum to the mesh volume (1e-12 relative) for all
+  four cell types and per_cell = 1, 2, 3, also on meshes with moved interior vertices;
+  every particle lies in its cell; mass = density x volume.
+"""
+import itertools
+
+import numpy as np
+import pytest
+from dolfinx import mesh as dmesh
+from mpi4py import MPI
+
+import fenicsmpm as fm
+
+CT = dmesh.CellType
+RHO = 1850.0
+
+
+def _rect(comm, ct, n=(6, 2), L=(1.5, 1.0)):
+    return dmesh.create_rectangle(comm, [[0.0, 0.0], list(L)], list(n), ct)
+
+
+def _box(comm, ct, n=(3, 2, 2), L=(1.5, 1.0, 1.0)):
+    return dmesh.create_box(comm, [[0.0, 0.0, 0.0], list(L)], list(n), ct)
+
+
+def test_h_square_quads(comm):
+    grid = fm.Grid(_rect(comm, CT.quadrilateral, n=(8, 4), L=(2.0, 1.0)))
+    assert abs(grid.h - 0.25) < 1e-14, f"grid.h = {grid.h!r}, expected the cell size 0.25 (1e-14)"
+
+
+def test_h_rectangular_quads_and_hexes(comm):
+    """Cells 0.25 x 0.5 (x 0.5): h is the shortest edge, 0.25."""
+    q = fm.Grid(_rect(comm, CT.quadrilateral))
+    h = fm.Grid(_box(comm, CT.hexahedron, n=(6, 2, 2)))
+    assert abs(q.h - 0.25) < 1e-14, f"quadrilateral grid.h = {q.h!r}, expected 0.25 (1e-14)"
+    assert abs(h.h - 0.25) < 1e-14, f"hexahedral grid.h = {h.h!r}, expected 0.25 (1e-14)"
+
+
+def test_h_right_triangles(comm):
+    """Right triangles with legs a = 0.25, b = 0.5: altitudes a, b and a b / sqrt(a^2 + b^2)."""
+    grid = fm.Grid(_rect(comm, CT.triangle))
+    a, b = 0.25, 0.5
+    exact = a * b / np.hypot(a, b)
+    assert abs(grid.h - exact) < 1e-12 * exact, (
+        f"triangle grid.h = {grid.h!r}, expected smallest altitude {exact!r} (1e-12 rel)")
+
+
+def test_h_tetrahedra(comm):
+    """Smallest altitude 3 |K| / |opposite face| over all tetrahedra, from the vertices."""
+    grid = fm.Grid(_box(comm, CT.tetrahedron, n=(3, 2, 2)))
+    xc = grid.node_x[grid.cell_nodes[: grid.n_owned_cells]]
+    vol = np.abs(np.einsum("ci,ci->c", np.cross(xc[:, 1] - xc[:, 0], xc[:, 2] - xc[:, 0]),
+                           xc[:, 3] - xc[:, 0])) / 6.0
+    alt = np.inf
+    for k in range(4):
+        f = [j for j in range(4) if j != k]
+        area = 0.5 * np.linalg.norm(np.cross(xc[:, f[1]] - xc[:, f[0]], xc[:, f[2]] - xc[:, f[0]]),
+                                    axis=1)
+        alt = min(alt, float(np.min(3.0 * vol / area)))
+    alt = comm.allreduce(alt, op=MPI.MIN)
+    assert abs(grid.h - alt) < 1e-12 * alt, (
+        f"tetrahedral grid.h = {grid.h!r}, expected smallest altitude {alt!r} (1e-12 rel)")
+
+
+@pytest.mark.parametrize("ct", [CT.quadrilateral, CT.triangle, CT.hexahedron, CT.tetrahedron],
+                         ids=lambda c: c.name)
+def test_structured_flag(comm, ct):
+    msh = _rect(comm, ct) if ct in (CT.quadrilateral, CT.triangle) else _box(comm, ct)
+    flags = comm.allgather(fm.Grid(msh).structured)
+    assert all(flags), f"{ct.name}: grid.structured per rank = {flags}, expected True"
+
+
+@pytest.mark.parametrize("ct,per_cell,distorted", list(itertools.product(
+    [CT.triangle, CT.quadrilateral, CT.tetrahedron, CT.hexahedron], [1, 2, 3], [False, True])),
+    ids=lambda v: v.name if isinstance(v, CT) else str(v))
+def test_fill_volume_and_mass(comm, distort, ct, per_cell, distorted):
+    """Sum of particle volumes = mesh volume 1.5 (1e-12 rel); mass = density V (1e-14 rel);
+    particles per cell: n^d; each particle is located in the cell that created it."""
+    d = 2 if ct in (CT.quadrilateral, CT.triangle) else 3
+    msh = _rect(comm, ct) if d == 2 else _box(comm, ct)
+    if distorted:
+        assert distort(msh, 0.1 * 0.25) > 0
+    grid = fm.Grid(msh)
+    mat = fm.LinearElastic(E=1e6, nu=0.3, density=RHO)
+    p = fm.Particles.fill(grid, mat, per_cell=per_cell)
+    volume = float(p.total(p.V))
+    mass = float(p.total(p.mass))
+    n_cells = comm.allreduce(grid.n_owned_cells)
+    vol_err = abs(volume - 1.5) / 1.5
+    mass_err = comm.allreduce(float(np.max(np.abs(p.mass - RHO * p.V) / (RHO * p.V))),
+                              op=MPI.MAX)
+    cells, _ = grid.locate(p.x)
+    misplaced = comm.allreduce(int(np.count_nonzero(cells != p.cell)))
+    assert vol_err < 1e-12, f"sum V_p = {volume!r}, mesh volume 1.5 (rel err {vol_err:.2e}, tol 1e-12)"
+    assert abs(mass - RHO * 1.5) < 1e-12 * RHO * 1.5, f"total mass {mass!r} != rho |Omega| = {RHO * 1.5}"
+    assert mass_err < 1e-14, f"max |m_p - rho V_p| / (rho V_p) = {mass_err:.2e} (tol 1e-14)"
+    assert p.n_global == n_cells * per_cell ** d, (
+        f"{p.n_global} particles, expected {n_cells} cells x {per_cell}^{d}")
+    assert np.all(p.V > 0) and misplaced == 0, f"{misplaced} particles not located in their cell"
