@@ -1,0 +1,78 @@
+"""The demos (--quick) and the README example run, serially and under `mpirun -n 2`.
+
+Each demo's `main(argv)` is called in-process (so it shares the MPI world with pytest) and
+returns its metrics on every rank. Tolerances: vibrating bar period within 1 % (explicit)
+and 3 % (implicit Newmark at 5x the critical step); self-weight column mid-depth stress
+within 2 % and top settlement within 3 %."""
+import importlib.util
+import os
+import re
+import shutil
+import tempfile
+from pathlib import Path
+
+import pytest
+from mpi4py import MPI
+
+ROOT = Path(__file__).resolve().parents[1]
+comm = MPI.COMM_WORLD
+
+
+@pytest.fixture(scope="module")
+def demo_dir():
+    """One temporary directory shared by all ranks (made on rank 0, broadcast)."""
+    path = tempfile.mkdtemp(prefix="fenicsmpm_demos_") if comm.rank == 0 else None
+    path = comm.bcast(path, root=0)
+    yield path
+    comm.barrier()
+    if comm.rank == 0:
+        shutil.rmtree(path, ignore_errors=True)
+
+
+def load_demo(name):
+    spec = importlib.util.spec_from_file_location(f"demo_{name}", ROOT / "demos" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def exist_on_rank0(*paths):
+    """Whether all paths exist, checked on rank 0 after every rank finished writing."""
+    comm.barrier()
+    ok = all(os.path.isfile(p) for p in paths) if comm.rank == 0 else None
+    return comm.bcast(ok, root=0)
+
+
+def test_vibrating_bar_demo(demo_dir):
+    out = os.path.join(demo_dir, "bar")
+    m = load_demo("vibrating_bar").main(["--quick", "--out", out])
+    assert exist_on_rank0(m["png"], m["explicit"]["probe_csv"], m["implicit"]["probe_csv"],
+                          os.path.join(out, "explicit", "particles.pvd"),
+                          os.path.join(out, "explicit", "grid.xdmf")), f"missing output in {out}"
+    assert abs(m["explicit"]["period_error"]) < 0.01, m["explicit"]
+    assert abs(m["implicit"]["period_error"]) < 0.03, m["implicit"]
+    assert m["implicit"]["dt"] > 4.99 * m["explicit"]["dt"] / 0.2      # 5x the critical step
+
+
+def test_self_weight_column_demo(demo_dir):
+    out = os.path.join(demo_dir, "column")
+    m = load_demo("self_weight_column").main(["--quick", "--out", out])
+    assert exist_on_rank0(m["png"], m["probe_csv"], os.path.join(out, "output", "particles.pvd"))
+    assert m["stress_error"] < 0.02, m
+    assert m["settlement_error"] < 0.03, m
+
+
+def readme_example():
+    """The first ```python block after the heading '## A complete example' in README.md."""
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## A complete example", 1)[1]
+    return re.search(r"```python\n(.*?)```", section, re.S).group(1)
+
+
+def test_readme_example(demo_dir, monkeypatch, capsys):
+    monkeypatch.chdir(demo_dir)                 # the example writes to results/example/
+    exec(compile(readme_example(), "README.md", "exec"), {"__name__": "__readme__"})
+    assert exist_on_rank0(os.path.join(demo_dir, "results", "example", "probe.csv"),
+                          os.path.join(demo_dir, "results", "example", "particles.pvd"))
+    if comm.rank == 0:
+        assert "sigma_yy under the load" in capsys.readouterr().out
