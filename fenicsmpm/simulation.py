@@ -134,12 +134,19 @@ class Simulation:
         return out
 
     def active_mask(self, m):
-        """Active nodes: mass above mass_tolerance times the global largest nodal mass."""
+        """Active nodes: mass above mass_tolerance times the global largest nodal mass.
+
+        Also restricts the particles' shape gradients to the active nodes (see
+        kernels.transfer.restrict_gradients), so all later stages use consistent gradients."""
         mmax = m.max() if len(m) else 0.0
         if self.comm.size > 1:
             from mpi4py import MPI
             mmax = self.comm.allreduce(mmax, op=MPI.MAX)
-        return m > self.mass_tolerance * mmax
+        active = m > self.mass_tolerance * mmax
+        t0 = time.perf_counter()
+        kt.restrict_gradients(self.grid.D, self.nodes, self.N, self.dN, active)
+        self.timers["shape"] += time.perf_counter() - t0
+        return active
 
     def external_force(self, t, m, gravity_scale=1.0):
         """Nodal external force, already summed over ranks: gravity sum_p N_ip m_p g = m_i g
