@@ -48,6 +48,7 @@ class Simulation:
         self.tractions = []
         self._traction_forms = None
         self.probes = []
+        self.observers = []
         self.nodal = {}
         self.stats = {}
         self.timers = dict(locate=0.0, shape=0.0, p2g=0.0, solve=0.0, g2p=0.0, constitutive=0.0,
@@ -81,6 +82,14 @@ class Simulation:
         """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
         self.tractions.append(Traction(where, value))
         self._traction_forms = None
+
+    def observe(self, callback, every=1):
+        """Call callback(sim) after every `every` steps (energy monitors, custom output)."""
+        if not callable(callback):
+            raise TypeError(f"observe: 'callback' must be callable, got {type(callback).__name__}")
+        if not (isinstance(every, (int, np.integer)) and every >= 1):
+            raise ValueError(f"observe: 'every' must be a positive integer, got {every!r}")
+        self.observers.append((callback, int(every)))
 
     def probe(self, point, fields=("velocity",), path=None, every=1):
         """Record fields of the particle nearest to `point` (by its initial position)."""
@@ -205,6 +214,9 @@ class Simulation:
         self.step_count += 1
         for pr in self.probes:
             pr.record()
+        for callback, every in self.observers:
+            if self.step_count % every == 0:
+                callback(self)
 
     def run(self, t_end=None, steps=None, output=None, progress=None):
         """Run until t_end or for a number of steps; write `output` (an Output) as configured.
@@ -235,7 +247,7 @@ class Simulation:
             if output is not None:
                 output.close()
             for pr in self.probes:
-                pr.finish()
+                pr.write_csv()
         return self
 
 
@@ -311,8 +323,9 @@ class Probe:
         rows = np.array(rows).reshape(-1, len(self.columns))
         return {c: rows[:, j] for j, c in enumerate(self.columns)}
 
-    def finish(self):
-        """Write the CSV of a parallel run (collective); serial runs stream it."""
+    def write_csv(self):
+        """Write the CSV of a parallel run (collective; `run` calls it at the end, call it
+        yourself after stepping with `step`). Serial runs stream rows as they come."""
         if self.path and self.sim.comm.size > 1:
             d = self.data()
             if self.sim.comm.rank == 0:

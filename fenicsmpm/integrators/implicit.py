@@ -24,8 +24,9 @@ class _Newton:
 
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
                  prefix=DEFAULT_PREFIX):
-        if not (rtol > 0 and utol > 0):
-            raise ValueError(f"{type(self).__name__}: 'rtol' must be > 0, got {rtol!r}")
+        for name, val in (("rtol", rtol), ("utol", utol)):
+            if not (isinstance(val, (int, float)) and val > 0):
+                raise ValueError(f"{type(self).__name__}: '{name}' must be > 0, got {val!r}")
         if not (isinstance(max_iter, int) and max_iter >= 1):
             raise ValueError(f"{type(self).__name__}: 'max_iter' must be a positive integer, got {max_iter!r}")
         self.rtol, self.utol, self.max_iter, self.flip = rtol, utol, max_iter, float(flip)

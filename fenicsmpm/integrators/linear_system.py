@@ -52,6 +52,7 @@ class LinearSystem:
         # petsc_options dict; what this object put into the options database is taken out
         # again after setFromOptions, so it cannot leak into the next simulation
         opts = PETSc.Options()
+        _insert_command_line_options(prefix)
         merged = {"ksp_type": "preonly", "pc_type": "lu"}
         if grid.comm.size > 1:
             merged["pc_factor_mat_solver_type"] = "mumps"
@@ -100,6 +101,28 @@ class LinearSystem:
     def destroy(self):
         self.ksp.destroy()
         self.A.destroy()
+
+
+def _insert_command_line_options(prefix, argv=None):
+    """Copy `-<prefix>name [value]` arguments from the command line into PETSc's options
+    database (dolfinx initialises PETSc without sys.argv, so they would be ignored)."""
+    import sys
+    argv = sys.argv[1:] if argv is None else argv
+    opts = PETSc.Options()
+    for i, a in enumerate(argv):
+        if a.startswith("-" + prefix):
+            nxt = argv[i + 1] if i + 1 < len(argv) else None
+            value = nxt if nxt is not None and not (nxt.startswith("-") and not _is_number(nxt)) else None
+            if not opts.hasName(a[1:]):
+                opts[a[1:]] = value if value is not None else ""
+
+
+def _is_number(s):
+    try:
+        float(s)
+        return True
+    except ValueError:
+        return False
 
 
 def _reason_name(code):

@@ -1,0 +1,55 @@
+"""PETSc solver selection (options prefix, petsc_options, command line) and observers."""
+import numpy as np
+import pytest
+
+import fenicsmpm as fm
+from fenicsmpm.integrators.linear_system import _insert_command_line_options
+from fenicsmpm.verification import vibrating_bar
+from petsc4py import PETSc
+
+
+def _ksp(sim):
+    ksp = sim.integrator.system.ksp
+    return ksp.getType(), ksp.getPC().getType()
+
+
+def test_default_is_direct_lu_and_options_do_not_leak():
+    sim, _ = vibrating_bar(fm.Newmark(petsc_options={"ksp_type": "cg", "pc_type": "jacobi"}))
+    assert _ksp(sim) == ("cg", "jacobi")
+    sim2, _ = vibrating_bar(fm.Newmark())
+    assert _ksp(sim2) == ("preonly", "lu"), "petsc_options of one simulation leaked into the next"
+
+
+def test_command_line_options_reach_the_ksp():
+    argv = ["--out", "dir", "-fenicsmpm_ksp_type", "gmres", "-fenicsmpm_ksp_rtol", "1e-11",
+            "-fenicsmpm_pc_type", "jacobi"]
+    _insert_command_line_options("fenicsmpm_", argv)
+    try:
+        sim, _ = vibrating_bar(fm.Newmark())
+        assert _ksp(sim) == ("gmres", "jacobi")
+        assert sim.integrator.system.ksp.getTolerances()[0] == pytest.approx(1e-11)
+        assert not PETSc.Options().hasName("out"), "unrelated arguments must not enter PETSc"
+    finally:
+        for k in ("ksp_type", "ksp_rtol", "pc_type"):
+            PETSc.Options().delValue("fenicsmpm_" + k)
+
+
+def test_iterative_and_direct_give_the_same_step():
+    """CG + Jacobi at a tight tolerance reproduces the LU result to 1e-9 after 10 steps."""
+    res = []
+    for opts in (None, {"ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-13}):
+        sim, _ = vibrating_bar(fm.Newmark(petsc_options=opts))
+        sim.run(steps=10)
+        res.append(np.concatenate(sim.comm.allgather(sim.particles.v[np.argsort(sim.particles.id)])))
+    assert np.max(np.abs(res[0] - res[1])) < 1e-9 * np.max(np.abs(res[0]))
+
+
+def test_observer_called_every_n_steps():
+    sim, ex = vibrating_bar(fm.Explicit("MUSL"))
+    seen = []
+    sim.observe(lambda s: seen.append((s.step_count, s.energy()["kinetic"] + s.energy()["strain"])), every=5)
+    sim.run(steps=20)
+    assert [k for k, _ in seen] == [5, 10, 15, 20]
+    assert all(abs(e / ex["energy"] - 1) < 0.02 for _, e in seen)
+    with pytest.raises(ValueError, match="every"):
+        sim.observe(lambda s: None, every=0)
