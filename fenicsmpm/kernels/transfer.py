@@ -98,15 +98,19 @@ def restrict_gradients(D, nodes, N, dN, active):
 
 
 @njit(cache=True)
-def interpolate(D, nodes, N, field, out):
-    """out_p = sum_i N_ip field_i."""
+def flip_blend(D, nodes, N, old, new, flip, q):
+    """q_p = flip (q_p + sum N (new - old)_i) + (1 - flip) sum N new_i (FLIP/PIC blend of a
+    nodal field's change; the acceleration update of implicit runs)."""
     d = len(D)
     for p in range(nodes.shape[0]):
         for k in range(d):
-            s = 0.0
+            dq = 0.0
+            qn = 0.0
             for a in range(nodes.shape[1]):
-                s += N[p, a] * field[nodes[p, a], k]
-            out[p, k] = s
+                i = nodes[p, a]
+                dq += N[p, a] * (new[i, k] - old[i, k])
+                qn += N[p, a] * new[i, k]
+            q[p, k] = flip * (q[p, k] + dq) + (1.0 - flip) * qn
 
 
 @njit(cache=True)
