@@ -37,14 +37,14 @@ $(VENV)/.installed: pyproject.toml | deps
 venv: $(VENV)/.installed
 
 test: $(VENV)/.installed
-	$(PY) -m pytest -q tests
-	timeout 1200 $(MPIRUN) $(PY) -m pytest -q tests
+	$(PY) -m pytest -q --color=no tests
+	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
 
 test-serial: $(VENV)/.installed
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q --color=no tests
 
 test-mpi: $(VENV)/.installed
-	timeout 1200 $(MPIRUN) $(PY) -m pytest -q tests
+	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
 
 demo: $(VENV)/.installed
 	$(PY) demos/vibrating_bar.py
