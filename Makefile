@@ -4,7 +4,7 @@ SYS_PYTHON := /usr/bin/python3
 VENV := .venv
 PY := $(VENV)/bin/python
 DEBS := python3-dolfinx python3-petsc4py python3-mpi4py python3-meshio python3-numba \
-        python3-scipy python3-matplotlib python3-pytest python3-setuptools python3-venv \
+        python3-scipy python3-matplotlib python3-pytest python3-setuptools python3-wheel python3-venv \
         mpi-default-bin
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 MPI_ROOT := $(shell [ "$$(id -u)" = 0 ] && echo --allow-run-as-root)
