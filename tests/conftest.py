@@ -17,16 +17,25 @@ def comm():
     return MPI.COMM_WORLD
 
 
-@pytest.fixture
-def shared_tmp_path(comm):
+def _shared_tmpdir(comm):
     """One temporary directory shared by all ranks: created on rank 0, broadcast, removed
-    after the test (once every rank is done with it)."""
+    at teardown (once every rank is done with it)."""
     path = tempfile.mkdtemp(prefix="fenicsmpm_test_") if comm.rank == 0 else None
     path = comm.bcast(path, root=0)
     yield path
     comm.barrier()
     if comm.rank == 0:
         shutil.rmtree(path, ignore_errors=True)
+
+
+@pytest.fixture
+def shared_tmp_path(comm):
+    yield from _shared_tmpdir(comm)
+
+
+@pytest.fixture(scope="module")
+def shared_module_tmp_path():
+    yield from _shared_tmpdir(MPI.COMM_WORLD)
 
 
 @pytest.fixture

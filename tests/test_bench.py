@@ -3,8 +3,6 @@ schema, the case registry and the CLI. Run serially and under mpirun -n 2."""
 import json
 import math
 import os
-import shutil
-import tempfile
 
 import pytest
 from mpi4py import MPI
@@ -19,14 +17,8 @@ TINY = 0.02          # of the --quick particle counts (a few thousand particles)
 
 
 @pytest.fixture(scope="module")
-def shared_dir():
-    """One temporary directory shared by all ranks."""
-    path = tempfile.mkdtemp(prefix="fenicsmpm_bench_") if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield path
-    comm.barrier()
-    if comm.rank == 0:
-        shutil.rmtree(path, ignore_errors=True)
+def shared_dir(shared_module_tmp_path):
+    return shared_module_tmp_path
 
 
 @pytest.fixture(scope="module")

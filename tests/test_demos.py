@@ -7,8 +7,6 @@ within 2 % and top settlement within 3 %."""
 import importlib.util
 import os
 import re
-import shutil
-import tempfile
 from pathlib import Path
 
 import pytest
@@ -19,14 +17,8 @@ comm = MPI.COMM_WORLD
 
 
 @pytest.fixture(scope="module")
-def demo_dir():
-    """One temporary directory shared by all ranks (made on rank 0, broadcast)."""
-    path = tempfile.mkdtemp(prefix="fenicsmpm_demos_") if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield path
-    comm.barrier()
-    if comm.rank == 0:
-        shutil.rmtree(path, ignore_errors=True)
+def demo_dir(shared_module_tmp_path):
+    return shared_module_tmp_path
 
 
 def load_demo(name):
