@@ -7,7 +7,8 @@ import time
 
 import numpy as np
 
-from .boundaries import Traction, TractionForms, fixed_dofs
+from .boundaries import Robin, RobinForms, Traction, TractionForms, fixed_dofs
+from .boundaries.robin import facets_on_boundary
 from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
@@ -47,6 +48,9 @@ class Simulation:
         self.fixed = np.zeros((grid.n_nodes, d), dtype=bool)
         self.tractions = []
         self._traction_forms = None
+        self.boundaries = []
+        self._robin = None
+        self.robin_u = np.zeros((grid.n_nodes, d))   # displacement seen by Robin boundaries
         self.probes = []
         self.observers = []
         self.nodal = {}
@@ -82,6 +86,26 @@ class Simulation:
         """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
         self.tractions.append(Traction(where, value))
         self._traction_forms = None
+
+    def add_boundary(self, boundary):
+        """Add a Robin boundary (fm.Viscous, fm.Viscoelastic or a user fm.Robin law) on mesh
+        facets. Its displacement u is measured from the time it is added (nodal, integrated
+        from the grid velocity). The forms are compiled once, at the next step."""
+        if not isinstance(boundary, Robin):
+            raise TypeError(f"add_boundary: expected fm.Robin, fm.Viscous or fm.Viscoelastic, "
+                            f"got {type(boundary).__name__}")
+        facets_on_boundary(self.grid, boundary.where, type(boundary).__name__)
+        boundary.bind(self.particles.materials)       # checks material constants now
+        self.boundaries.append(boundary)
+        self._robin = None
+
+    @property
+    def robin(self):
+        """The compiled Robin forms (built on first use), or None without Robin boundaries."""
+        if self._robin is None and self.boundaries:
+            self._robin = RobinForms(self.grid, self.boundaries, self.particles.materials,
+                                     implicit=not self.integrator.explicit)
+        return self._robin
 
     def observe(self, callback, every=1):
         """Call callback(sim) after every `every` steps (energy monitors, custom output)."""

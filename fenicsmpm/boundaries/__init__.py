@@ -1,5 +1,7 @@
-"""Boundary conditions on the grid: Dirichlet sets and UFL traction forms."""
+"""Boundary conditions on the grid: Dirichlet sets, UFL traction forms and Robin laws."""
 from .dirichlet import fixed_dofs
+from .robin import Robin, RobinForms, Viscoelastic, Viscous
 from .traction import Traction, TractionForms
 
-__all__ = ["fixed_dofs", "Traction", "TractionForms"]
+__all__ = ["fixed_dofs", "Robin", "RobinForms", "Traction", "TractionForms", "Viscoelastic",
+           "Viscous"]

@@ -62,6 +62,11 @@ class Explicit:
         sim.internal_force(p.stress, f)
         grid.accumulate(f)
         f += sim.external_force(sim.t, m)
+        if sim.robin is not None:                 # Robin tractions from the start-of-step state
+            fr = np.zeros_like(f)
+            sim.robin.force(sim.robin_u, v0, fr)
+            grid.accumulate(fr)
+            f += fr
         t1 = time.perf_counter()
         v1 = v0 + dt * f * inv_m[:, None] * free
         t2 = time.perf_counter()
@@ -77,4 +82,6 @@ class Explicit:
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             self._stress_update(sim, v1, dt)
+        if sim.robin is not None:
+            sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active)

@@ -45,9 +45,10 @@ class _Newton:
         s = float(np.sum(own * own))
         return np.sqrt(sim.comm.allreduce(s) if sim.comm.size > 1 else s)
 
-    def solve_step(self, sim, dt, f_ext, m_coef, inertia):
+    def solve_step(self, sim, dt, f_ext, m_coef, inertia, velocity=None, c_v=0.0):
         """Newton loop for du. inertia(du) returns the nodal inertial force M a^{n+1}(du) (or 0);
-        m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static).
+        m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static); velocity(du) gives
+        the end-of-step nodal velocity, with dv/du = c_v, for the Robin boundaries.
 
         Converged when |R| <= rtol |f|, or when the last correction is below utol |du| with
         |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|, |R_0|);
@@ -78,6 +79,12 @@ class _Newton:
             sim.internal_force(P, fint)          # -f_int (local)
             grid.accumulate(fint)
             R = f_ext + fint - inertia(du)
+            robin = sim.robin
+            if robin is not None:
+                fr = np.zeros_like(du)
+                robin.force(sim.robin_u + du, velocity(du), fr)
+                grid.accumulate(fr)
+                R += fr
             R[cmask] = 0.0
             rnorm = self._norm(sim, R)
             if it == 0:
@@ -98,6 +105,9 @@ class _Newton:
                 mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
             first_piola_tangent(idx, sim._dF, sig, dsig, A4)
             sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained)
+            if robin is not None:
+                own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)
+                sys.add(robin.tangent(sim.robin_u + du, velocity(du), c_v, own))
             t3 = time.perf_counter()
             delta = sys.solve(R)
             du += delta
@@ -108,6 +118,8 @@ class _Newton:
             T["ksp"] += t4 - t3
             T["solve"] += t4 - t2
         self.iterations.append(it)
+        if sim.robin is not None:
+            sim.robin_u += du
         sim.stats.update(newton_iterations=it, residual=rnorm / scale, ksp_iterations=sys.iterations)
         return du
 
@@ -145,7 +157,11 @@ class Newmark(_Newton):
             a1[~active] = 0.0
             return a1
 
-        du = self.solve_step(sim, dt, f_ext, 1.0 / (b * dt * dt), lambda du: m[:, None] * accel(du))
+        def velocity(du):
+            return v0 + dt * ((1 - g) * a0 + g * accel(du))
+
+        du = self.solve_step(sim, dt, f_ext, 1.0 / (b * dt * dt), lambda du: m[:, None] * accel(du),
+                             velocity, g / (b * dt))
         t0 = time.perf_counter()
         a1 = accel(du)
         a1[sim.fixed] = 0.0
@@ -177,7 +193,7 @@ class QuasiStatic(_Newton):
         scale = min(1.0, (sim.step_count + 1) / self.load_steps)
         f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale)
         sim.nodal = dict(mass=m, active=sim.active_mask(m))
-        du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0)
+        du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt)
         zero = np.zeros_like(du)
         kt.g2p(sim.grid.D, sim.nodes, sim.N, du, zero, zero, 1.0, p.x, p.v, p.u)
         p.v[:] = 0.0

@@ -85,6 +85,10 @@ class LinearSystem:
         self.A.setValuesLocalCSR(self.indptr, self.indices, self.data, addv=PETSc.InsertMode.ADD)
         self.A.assemble()
 
+    def add(self, B):
+        """K += B for a matrix whose pattern is within K's (dolfinx forms on the same space)."""
+        self.A.axpy(1.0, B, structure=PETSc.Mat.Structure.SUBSET_NONZERO_PATTERN)
+
     def solve(self, R):
         """Solve K dx = R, where R (n_nodes, gdim) is complete (already summed) on every rank."""
         self.b.x.array[:] = R.ravel()
