@@ -20,6 +20,7 @@ FIELDS = {
     "V": (lambda d: (), np.float64),          # current volume
     "F": (lambda d: (3, 3), np.float64),      # deformation gradient (plane strain in 2D)
     "stress": (lambda d: (3, 3), np.float64), # Cauchy stress, tension positive
+    "stress_initial": (lambda d: (3, 3), np.float64),  # sigma_ini of a staged analysis
     "work": (lambda d: (), np.float64),       # accumulated stress work (strain energy) per particle
     "material_id": (lambda d: (), np.int32),
     "cell": (lambda d: (), np.int32),

@@ -51,6 +51,8 @@ class Simulation:
         self.boundaries = []
         self._robin = None
         self.robin_u = np.zeros((grid.n_nodes, d))   # displacement seen by Robin boundaries
+        self.initial_stress = False                  # internal force from sigma - sigma_ini
+        self.stage_start = 0.0
         self.probes = []
         self.observers = []
         self.nodal = {}
@@ -81,6 +83,45 @@ class Simulation:
 
         A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1])."""
         self.fixed |= fixed_dofs(self.grid, where, components)
+
+    def release(self, where=None, components=None):
+        """Remove Dirichlet conditions at nodes where(x) (default: everywhere) on the given
+        components (default: all), e.g. to replace a fixed base by an absorbing one."""
+        mask = (np.ones((self.grid.n_nodes, self.gdim), dtype=bool) if where is None
+                else fixed_dofs(self.grid, where, components))
+        self.fixed &= ~mask
+
+    def start_stage(self, integrator=None, dt=None, gravity=None, initial_stress=True,
+                    reset_displacement=True):
+        """Begin a new stage on this simulation (seed 000 §3.5), e.g. after a static gravity
+        stage: `sim.start_stage(fm.Newmark(), dt=5e-3, gravity=(0, 0))` then swap boundaries
+        with `release` and `add_boundary`.
+
+        initial_stress: keep the current stress as sigma_ini; from now on the internal force
+          comes from sigma_dyn = sigma - sigma_ini while materials see the total stress, so
+          removing gravity together with sigma_ini leaves the body in equilibrium.
+        reset_displacement: measure particle displacements (and Robin spring displacements)
+          from the start of the stage."""
+        p = self.particles
+        if integrator is not None:
+            self.integrator = integrator
+            integrator.setup(self)
+            self._robin = None                    # recompile for the new integrator
+        if dt is not None or integrator is not None:
+            self.dt = self._check_dt(self.dt if dt is None else dt)
+        if gravity is not None:
+            g = np.asarray(gravity, dtype=np.float64)
+            if g.shape != (self.gdim,) or not np.all(np.isfinite(g)):
+                raise ValueError(f"start_stage: 'gravity' must be a finite vector of length "
+                                 f"{self.gdim}, got {gravity!r}")
+            self.gravity = g
+        self.initial_stress = bool(initial_stress)
+        p.stress_initial[:] = p.stress if initial_stress else 0.0
+        if reset_displacement:
+            p.u[:] = 0.0
+            self.robin_u[:] = 0.0
+        p.a[:] = 0.0
+        self.stage_start = self.t
 
     def add_traction(self, where, value):
         """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
@@ -193,6 +234,11 @@ class Simulation:
             self.grid.accumulate(ft)
             f += ft
         return f
+
+    def dynamic_stress(self, stress):
+        """stress - sigma_ini in a stage started with initial_stress=True (seed 000 §3.5: the
+        internal force comes from sigma_dyn), else stress itself."""
+        return stress - self.particles.stress_initial if self.initial_stress else stress
 
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""

@@ -59,7 +59,7 @@ class Explicit:
             self._stress_update(sim, v0, dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
-        sim.internal_force(p.stress, f)
+        sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
         f += sim.external_force(sim.t, m)
         if sim.robin is not None:                 # Robin tractions from the start-of-step state

@@ -74,7 +74,7 @@ class _Newton:
             t1 = time.perf_counter()
             kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, du, 1.0, sim._dF)
             sig = sim.trial_stress(sim._dF)
-            first_piola(idx, sim._dF, sig, P)
+            first_piola(idx, sim._dF, sim.dynamic_stress(sig), P)
             fint = np.zeros_like(du)
             sim.internal_force(P, fint)          # -f_int (local)
             grid.accumulate(fint)
@@ -103,7 +103,7 @@ class _Newton:
             t2 = time.perf_counter()
             for mat, gidx in sim.material_groups():
                 mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
-            first_piola_tangent(idx, sim._dF, sig, dsig, A4)
+            first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
             sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained)
             if robin is not None:
                 own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)

@@ -1,0 +1,358 @@
+"""Benchmark case `accuracy`: run time against error on problems with known answers.
+
+    python -m fenicsmpm.bench accuracy [--quick]
+
+Problems (fenicsmpm.verification), all on quadrilaterals with 2x2 particles per cell:
+  V1 vibrating bar (L = 1, E = 100, rho = 1, v0 = 0.1; first mode, period T = 4 L / c),
+      explicit MUSL at cfl 0.2 and implicit Newmark at dt = 5 h / c, over PERIODS = 2
+      periods, bar cells n = 10, 20, 40, 80, 160 (quick: 10, 20, 40). A probe follows the
+      particle nearest the free end (initial position X). Metrics:
+        period_error        |T_measured / T - 1|, T_measured from a straight-line fit of the
+                            (linearly interpolated) zero crossings of the probe's velocity
+                            (consecutive crossings are half a period apart);
+                            period_error_signed keeps the sign
+        rms_velocity_error  RMS over the probe samples of v(t) - v0 cos(w t) sin(pi X / 2L),
+                            divided by v0
+        energy_drift        (E_end - E_0) / E_0, E = kinetic + strain (every step);
+                            max_energy_error = max |E - E_0| / E_0
+  V2 self-weight column, small strain (H = 10, rho = 2000, g = 10, E = 1e8, nu = 0:
+      M = E, strain ~ 2e-3), QuasiStatic with gravity ramped over 5 load steps, column
+      cells n = 5, 10, 20, 40, 80 (quick: 5, 10, 20, 40). Metrics (Y_p = x_p - u_p, the
+      initial height):
+        stress_error        sum_p |sigma_yy,p - sigma_a(Y_p)| V0_p / (rho g H sum_p V0_p),
+                            sigma_a(y) = -rho g (H - y)  (AMPLE-style normalized error)
+        top_settlement_error  |u_y - u_a(Y)| of the top particles (mean) over rho g H^2 / (2 M),
+                            u_a(y) = -rho g (H y - y^2 / 2) / M: the error at the particles'
+                            own height; top_settlement_vs_surface compares the same
+                            settlement with the surface value rho g H^2 / (2 M) instead
+        newton_iterations_max
+wall_s is the time spent in Simulation.step only (set-up and the error diagnostics are not
+counted; the slowest rank under MPI). An untimed warm-up run of each integrator absorbs
+numba's cache loading before the first timed run.
+
+Output: accuracy.json (common schema; extra key "convergence": per series and metric the
+cell sizes, errors, wall times and the least-squares slope of log(error) against log(h)),
+accuracy_convergence.png (error against cell size, log-log, fitted slope in the legend),
+accuracy_pareto.png (error against wall time) and a table."""
+import math
+import os
+import time
+
+import numpy as np
+
+from . import common
+
+CASE = "accuracy"
+PERIODS = 2
+CFL = 0.2
+NEWMARK_DT_FACTOR = 5.0
+LOAD_STEPS = 5
+PER_CELL = 2
+V0 = 0.1
+V2 = dict(height=10.0, density=2000.0, g=10.0, E=1e8, nu=0.0)
+
+V1_CELLS = {"full": (10, 20, 40, 80, 160), "quick": (10, 20, 40)}
+V2_CELLS = {"full": (5, 10, 20, 40, 80), "quick": (5, 10, 20, 40)}
+
+# (problem, series, metric, label) drawn in the plots; the JSON fits every metric below
+PLOTTED = [
+    ("V1", "explicit-MUSL", "period_error", "V1 explicit MUSL: period"),
+    ("V1", "explicit-MUSL", "rms_velocity_error", "V1 explicit MUSL: RMS velocity"),
+    ("V1", "Newmark", "period_error", "V1 Newmark: period"),
+    ("V1", "Newmark", "rms_velocity_error", "V1 Newmark: RMS velocity"),
+    ("V2", "QuasiStatic", "stress_error", "V2: stress (normalized L1)"),
+    ("V2", "QuasiStatic", "top_settlement_error", "V2: top settlement"),
+]
+FITTED = {"V1": ("period_error", "rms_velocity_error", "abs_energy_drift", "max_energy_error"),
+          "V2": ("stress_error", "top_settlement_error")}
+
+
+def _max(comm, x):
+    from mpi4py import MPI
+    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
+
+
+def _sum(comm, x):
+    return comm.allreduce(x) if comm.size > 1 else x
+
+
+def _global_cells(sim):
+    return _sum(sim.comm, sim.grid.n_owned_cells)
+
+
+def measured_period(t, v):
+    """Period from a straight-line fit of the linearly interpolated zero crossings of v(t)
+    (consecutive crossings are half a period apart); nan with fewer than two crossings."""
+    t, v = np.asarray(t), np.asarray(v)
+    i = np.flatnonzero(np.sign(v[:-1]) * np.sign(v[1:]) < 0)
+    if len(i) < 2:
+        return math.nan
+    tz = t[i] - v[i] * (t[i + 1] - t[i]) / (v[i + 1] - v[i])
+    return 2.0 * np.polyfit(np.arange(len(tz)), tz, 1)[0]
+
+
+def _timed_steps(sim, steps, every=None):
+    """Advance `steps` steps; returns the wall time inside sim.step (slowest rank) and, when
+    `every` is a callable, its value after each step (called outside the timing)."""
+    wall, samples = 0.0, []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        sim.step()
+        wall += time.perf_counter() - t0
+        if every is not None:
+            samples.append(every())
+    return _max(sim.comm, wall), samples
+
+
+def _integrator(series):
+    import fenicsmpm as fm
+    if series == "explicit-MUSL":
+        return fm.Explicit("MUSL")
+    if series == "Newmark":
+        return fm.Newmark()
+    return fm.QuasiStatic(load_steps=LOAD_STEPS)
+
+
+def run_v1(series, n_cells, comm, periods=PERIODS):
+    """One V1 vibrating-bar run; the record."""
+    from ..verification import vibrating_bar
+    integ = _integrator(series)
+    t0 = time.perf_counter()
+    sim, exact = vibrating_bar(integ, n_cells=n_cells, per_cell=PER_CELL, cfl=CFL, v0=V0,
+                               comm=comm)
+    L, h, T = 1.0, exact["h"], exact["period"]
+    probe = sim.probe((L, h / 2), fields=("velocity", "position"))
+    setup = _max(comm, time.perf_counter() - t0)
+
+    def energy():
+        e = sim.energy()
+        return e["kinetic"] + e["strain"]
+
+    E0 = energy()
+    steps = int(math.ceil(periods * T / sim.dt - 1e-9))
+    wall, E = _timed_steps(sim, steps, energy)
+    E = np.array([E0] + E)
+    d = probe.data()
+    X = d["position_x"][0]
+    Tm = measured_period(d["t"], d["velocity_x"])
+    v_exact = exact["velocity"](X, d["t"])
+    rms = float(np.sqrt(np.mean((d["velocity_x"] - v_exact) ** 2)) / V0)
+    drift = (E[-1] - E0) / E0
+    m = dict(period_error=abs(Tm / T - 1.0), period_error_signed=Tm / T - 1.0,
+             period_s=Tm, exact_period_s=T, rms_velocity_error=rms, energy_drift=drift,
+             abs_energy_drift=abs(drift), max_energy_error=float(np.max(np.abs(E - E0)) / E0),
+             probe_X=X, setup_s=setup, wall_per_step_s=wall / steps,
+             dt_over_dt_critical=sim.dt / sim.dt_critical)
+    if not integ.explicit:
+        m["newton_iterations_mean"] = float(np.mean(integ.iterations))
+    cfg = dict(problem="V1 vibrating bar", integrator=type(integ).__name__,
+               scheme=getattr(integ, "scheme", "Newmark"), shape="Q1 (standard MPM)", h=h,
+               dt=sim.dt, ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
+               periods=periods, length=L, E=100.0, density=1.0, v0=V0,
+               dt_rule=f"cfl {CFL:g} * h / c" if integ.explicit
+               else f"{NEWMARK_DT_FACTOR:g} * h / c")
+    rec = common.make_record(f"V1 {series} n={n_cells}", cfg, sim.particles.n_global,
+                             _global_cells(sim), steps, wall, m)
+    rec.update(problem="V1", series=series)
+    if not integ.explicit:
+        integ.system.destroy()
+    return rec
+
+
+def run_v2(n_cells, comm):
+    """One V2 self-weight-column run (quadrilaterals); the record."""
+    from mpi4py import MPI
+    from ..verification import self_weight_column
+    integ = _integrator("QuasiStatic")
+    t0 = time.perf_counter()
+    sim, exact = self_weight_column(integ, n_cells=n_cells, per_cell=PER_CELL, comm=comm, **V2)
+    setup = _max(comm, time.perf_counter() - t0)
+    wall, _ = _timed_steps(sim, LOAD_STEPS)
+    p = sim.particles
+    H, rho, g = V2["height"], V2["density"], V2["g"]
+    Y = (p.x - p.u)[:, 1]
+    num = _sum(comm, float(np.sum(np.abs(p.stress[:, 1, 1] - exact["stress_yy"](Y)) * p.V0)))
+    vol = _sum(comm, float(np.sum(p.V0)))
+    stress_error = num / (rho * g * H * vol)
+    ytop = comm.allreduce(float(Y.max()) if len(Y) else -np.inf, op=MPI.MAX)
+    top = np.abs(Y - ytop) < 1e-9 * H
+    n_top = _sum(comm, int(np.count_nonzero(top)))
+    uy = _sum(comm, float(p.u[top, 1].sum())) / n_top
+    ref = exact["top_settlement"]
+    m = dict(stress_error=stress_error,
+             top_settlement_error=abs(uy - exact["displacement_y"](ytop)) / ref,
+             top_settlement_vs_surface=abs(-uy / ref - 1.0), top_Y=ytop,
+             newton_iterations_max=max(integ.iterations), setup_s=setup,
+             wall_per_step_s=wall / LOAD_STEPS)
+    cfg = dict(problem="V2 self-weight column (small strain)", integrator="QuasiStatic",
+               scheme="QuasiStatic", shape="Q1 (standard MPM)", h=exact["h"], dt=sim.dt,
+               ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
+               load_steps=LOAD_STEPS, **V2)
+    rec = common.make_record(f"V2 QuasiStatic n={n_cells}", cfg, p.n_global, _global_cells(sim),
+                             LOAD_STEPS, wall, m)
+    rec.update(problem="V2", series="QuasiStatic")
+    integ.system.destroy()
+    return rec
+
+
+def _warm_up(comm):
+    """Untimed short runs of each integrator: numba's cached kernels are loaded here."""
+    from ..verification import self_weight_column, vibrating_bar
+    for series in ("explicit-MUSL", "Newmark"):
+        integ = _integrator(series)
+        sim, _ = vibrating_bar(integ, n_cells=4, per_cell=PER_CELL, cfl=CFL, v0=V0, comm=comm)
+        sim.probe((1.0, 0.125), fields=("velocity", "position"))
+        for _ in range(2):
+            sim.step()
+            sim.energy()
+        if not integ.explicit:
+            integ.system.destroy()
+    integ = _integrator("QuasiStatic")
+    sim, _ = self_weight_column(integ, n_cells=4, per_cell=PER_CELL, comm=comm, **V2)
+    sim.step()
+    integ.system.destroy()
+
+
+def fit_slope(h, err):
+    """Least-squares slope of log(err) against log(h) over the positive finite errors
+    (None with fewer than two)."""
+    h, err = np.asarray(h, dtype=float), np.array([np.nan if e is None else e for e in err],
+                                                  dtype=float)
+    ok = np.isfinite(err) & (err > 0)
+    if np.count_nonzero(ok) < 2:
+        return None
+    return float(np.polyfit(np.log(h[ok]), np.log(err[ok]), 1)[0])
+
+
+def convergence(runs):
+    """Per (problem, series, metric): cell sizes, errors, wall times, fitted slope."""
+    out = []
+    for problem, metrics in FITTED.items():
+        for series in dict.fromkeys(r["series"] for r in runs if r["problem"] == problem):
+            rs = sorted((r for r in runs if r["problem"] == problem and r["series"] == series),
+                        key=lambda r: -r["config"]["h"])
+            h = [r["config"]["h"] for r in rs]
+            for metric in metrics:
+                err = [r["metrics"].get(metric) for r in rs]
+                out.append(dict(problem=problem, series=series, metric=metric, h=h, error=err,
+                                wall_s=[r["wall_s"] for r in rs], slope=fit_slope(h, err)))
+    return out
+
+
+def _find(conv, problem, series, metric):
+    for c in conv:
+        if (c["problem"], c["series"], c["metric"]) == (problem, series, metric):
+            return c
+    return None
+
+
+def plot(doc, out, comm):
+    conv = doc["convergence"]
+    quick = " (quick)" if doc.get("quick") else ""
+    title = common.machine_title(doc["machine"])
+    paths = []
+    for kind in ("convergence", "pareto"):
+        fig, axes = common.new_figure(ncols=2, size=(5.6, 4.4))
+        for j, problem in enumerate(("V1", "V2")):
+            ax = axes[0, j]
+            for k, (prob, series, metric, label) in enumerate(PLOTTED):
+                c = _find(conv, prob, series, metric)
+                if prob != problem or c is None:
+                    continue
+                x = np.array(c["h"] if kind == "convergence" else c["wall_s"], dtype=float)
+                y = np.array([np.nan if e is None else e for e in c["error"]], dtype=float)
+                ok = np.isfinite(y) & (y > 0) & (x > 0)
+                if not np.any(ok):
+                    continue
+                marker = "os^v"[k % 4]
+                lbl = label
+                if kind == "convergence":
+                    lbl += f" (slope {c['slope']:.2f})" if c["slope"] is not None else ""
+                ax.loglog(x[ok], y[ok], marker + "-", ms=4, lw=1.2, label=lbl, color=f"C{k}")
+            if kind == "convergence":
+                ax.set_xlabel("cell size h [m]")
+            else:
+                ax.set_xlabel("wall time in Simulation.step [s]")
+            ax.set_ylabel("relative error")
+            ax.set_title("V1 vibrating bar (2 periods)" if problem == "V1" else
+                         f"V2 self-weight column (quads, {LOAD_STEPS} load steps)", fontsize=9)
+            ax.grid(True, which="both", lw=0.3, alpha=0.5)
+            ax.legend(fontsize=7, loc="best")
+        name = f"{CASE}_{kind}.png"
+        what = "error against cell size" if kind == "convergence" else \
+            "error against run time (Pareto view)"
+        paths.append(common.save_figure(fig, os.path.join(out, name), comm,
+                                        title=f"fenicsmpm accuracy{quick}: {what}\n{title}"))
+    return paths
+
+
+def print_report(doc, comm):
+    v1 = [r for r in doc["runs"] if r["problem"] == "V1"]
+    v2 = [r for r in doc["runs"] if r["problem"] == "V2"]
+    cols = [("run", "name"), ("particles", "n_particles"), ("cells", "n_cells"),
+            ("steps", "steps"), ("h", lambda r: r["config"]["h"]),
+            ("dt", lambda r: r["config"]["dt"]), ("wall [s]", "wall_s"),
+            ("period err", lambda r: r["metrics"]["period_error_signed"]),
+            ("RMS v err", lambda r: r["metrics"]["rms_velocity_error"]),
+            ("energy drift", lambda r: r["metrics"]["energy_drift"]),
+            ("max |dE|/E0", lambda r: r["metrics"]["max_energy_error"])]
+    common.print_table(v1, cols, comm, title=f"\n== {CASE}{' (quick)' if doc['quick'] else ''}: "
+                       f"{doc['machine']['ranks']} rank(s)\nV1 vibrating bar, {PERIODS} periods "
+                       f"(errors relative: period to T, RMS velocity to v0, energy to E0)")
+    cols = [("run", "name"), ("particles", "n_particles"), ("cells", "n_cells"),
+            ("steps", "steps"), ("h", lambda r: r["config"]["h"]), ("wall [s]", "wall_s"),
+            ("stress err", lambda r: r["metrics"]["stress_error"]),
+            ("settlement err", lambda r: r["metrics"]["top_settlement_error"]),
+            ("vs surface", lambda r: r["metrics"]["top_settlement_vs_surface"]),
+            ("newton max", lambda r: r["metrics"]["newton_iterations_max"])]
+    common.print_table(v2, cols, comm, title="V2 self-weight column (stress: sum |s - s_a| V0 / "
+                       "(rho g H V); settlement: over rho g H^2 / 2M)")
+    rows = [dict(c, slope=c["slope"]) for c in doc["convergence"]]
+    common.print_table(rows, [("problem", "problem"), ("series", "series"), ("metric", "metric"),
+                              ("finest h", lambda c: c["h"][-1]),
+                              ("error at finest", lambda c: c["error"][-1]),
+                              ("slope vs h", "slope")], comm,
+                       title="convergence: least-squares slope of log(error) against log(h)")
+
+
+def run(quick=False, out="bench-results", comm=None, v1_cells=None, v2_cells=None,
+        periods=PERIODS, verbose=True):
+    """Run the case, write out/accuracy.json and the two PNGs, print the tables; returns the
+    result dict (on every rank). v1_cells / v2_cells override the cell counts."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD if comm is None else comm
+    mode = "quick" if quick else "full"
+    v1_cells = tuple(V1_CELLS[mode] if v1_cells is None else v1_cells)
+    v2_cells = tuple(V2_CELLS[mode] if v2_cells is None else v2_cells)
+    for name, cells in (("v1_cells", v1_cells), ("v2_cells", v2_cells)):
+        if not cells or any(not (isinstance(n, (int, np.integer)) and n >= 1) for n in cells):
+            raise ValueError(f"{CASE}: {name!r} must be positive integers, got {cells!r}")
+    if not (isinstance(periods, (int, float)) and periods >= 1):
+        raise ValueError(f"{CASE}: 'periods' must be >= 1, got {periods!r}")
+    t_start = time.perf_counter()
+    load_start = common._load_average()
+    _warm_up(comm)
+    runs = []
+    for series in ("explicit-MUSL", "Newmark"):
+        for n in v1_cells:
+            runs.append(run_v1(series, n, comm, periods))
+            if verbose:
+                r = runs[-1]
+                common.say(comm, f"[{CASE}] V1 {series} n={n}: {r['steps']} steps, "
+                           f"{r['wall_s']:.3g} s, period error "
+                           f"{r['metrics']['period_error_signed']:+.3e}")
+    for n in v2_cells:
+        runs.append(run_v2(n, comm))
+        if verbose:
+            r = runs[-1]
+            common.say(comm, f"[{CASE}] V2 n={n}: {r['wall_s']:.3g} s, stress error "
+                       f"{r['metrics']['stress_error']:.3e}")
+    doc = common.result(CASE, runs, comm, quick=quick, periods=periods,
+                        convergence=convergence(runs),
+                        total_wall_s=_max(comm, time.perf_counter() - t_start),
+                        load_average_1min_start=load_start)
+    common.write_result(doc, out, comm)
+    plot(doc, out, comm)
+    if verbose:
+        print_report(doc, comm)
+    return doc

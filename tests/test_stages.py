@@ -1,0 +1,74 @@
+"""Staged analysis (seed 000 §3.5): a static gravity stage, then a dynamic stage with gravity
+removed, absorbing boundaries and sigma = sigma_ini + sigma_dyn, on one Simulation."""
+import numpy as np
+import pytest
+from mpi4py import MPI
+
+import fenicsmpm as fm
+from fenicsmpm.verification import self_weight_column
+
+BASE = staticmethod(lambda x: np.isclose(x[:, 1], 0.0))
+
+
+def _gravity_stage(E=1e7):
+    sim, ex = self_weight_column(fm.QuasiStatic(load_steps=2), n_cells=10, E=E)
+    sim.run(steps=2)
+    return sim, ex
+
+
+def _max_speed(sim):
+    p = sim.particles
+    return sim.comm.allreduce(float(np.max(np.abs(p.v), initial=0.0)), op=MPI.MAX)
+
+
+@pytest.mark.parametrize("integrator", ["newmark", "explicit"])
+def test_dynamic_stage_starts_in_equilibrium(integrator):
+    """After the gravity stage, switching to dynamics with sigma_ini kept, gravity removed and
+    the fixed base replaced by a viscous one, the column stays at rest."""
+    sim, ex = _gravity_stage()
+    sy = sim.comm.allreduce(float(np.min(sim.particles.stress[:, 1, 1], initial=0.0)), op=MPI.MIN)
+    assert sy < -0.9 * 2000 * 10 * 10 * 0.9          # the gravity stage did load the column
+    integ = fm.Newmark() if integrator == "newmark" else fm.Explicit("MUSL")
+    sim.start_stage(integ, dt=5e-3 if integrator == "newmark" else "auto", gravity=(0.0, 0.0))
+    sim.release(lambda x: np.isclose(x[:, 1], 0.0), [1])
+    sim.add_boundary(fm.Viscous(lambda x: np.isclose(x[:, 1], 0.0)))
+    sim.run(steps=50)
+    v = _max_speed(sim)
+    # scale: the speed a 1 % imbalance of the self-weight would cause in the same time
+    scale = 0.01 * 10.0 * sim.t
+    assert v < 1e-6 * scale, f"max speed {v:.3e} m/s after the stage switch (tolerance {1e-6 * scale:.1e})"
+    # total stress still carries the geostatic state (materials see the total)
+    sy2 = sim.comm.allreduce(float(np.min(sim.particles.stress[:, 1, 1], initial=0.0)), op=MPI.MIN)
+    assert abs(sy2 / sy - 1) < 1e-6
+
+
+def test_without_initial_stress_the_column_rebounds():
+    """Control: removing gravity but keeping the full stress in the internal force makes the
+    column spring up (so the equilibrium above is not trivial)."""
+    sim, ex = _gravity_stage()
+    sim.start_stage(fm.Newmark(), dt=5e-3, gravity=(0.0, 0.0), initial_stress=False)
+    sim.run(steps=20)
+    assert _max_speed(sim) > 1e-3
+
+
+def test_dashpot_base_creeps_under_gravity_spring_dashpot_does_not():
+    """Keeping gravity and the total stress, a purely viscous base lets the column sink at a
+    steady rate (a dashpot carries a static load only by moving), a viscoelastic base does not
+    (BENCHMARKS W: pure dashpots under static stress creep)."""
+    rates = {}
+    for kind in ("viscous", "viscoelastic"):
+        sim, ex = _gravity_stage(E=1e9)             # c_p = 707 m/s: sinks ~0.14 m/s if viscous
+        sim.start_stage(fm.Newmark(), dt=5e-3, initial_stress=False)
+        sim.release(lambda x: np.isclose(x[:, 1], 0.0), [1])
+        bc = (fm.Viscous(lambda x: np.isclose(x[:, 1], 0.0)) if kind == "viscous" else
+              fm.Viscoelastic(lambda x: np.isclose(x[:, 1], 0.0), r_b=10.0))
+        sim.add_boundary(bc)
+        probe = sim.probe((0.5, 0.25), ["displacement"])
+        sim.run(steps=200)
+        d = probe.data()
+        t, u = d["t"], d["displacement_y"]
+        late = t > 0.8 * t[-1]
+        rates[kind] = abs(np.polyfit(t[late], u[late], 1)[0])
+    # viscous: sinks at about rho g H / (rho c_p) = g H / c_p = 0.14 m/s
+    assert 0.5 < rates["viscous"] / (10.0 * 10.0 / np.sqrt(1e9 / 2000.0)) < 1.5, rates
+    assert rates["viscous"] > 100 * rates["viscoelastic"], rates
