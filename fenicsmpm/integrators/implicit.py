@@ -142,7 +142,8 @@ class Newmark(_Newton):
         ma = sim.nodal_weighted(p.a)
         grid.accumulate(m, mv, ma)
         f_ext = sim.external_force(sim.t + dt, m)
-        active = sim.active_mask(m)
+        sim.timers["p2g"] += time.perf_counter() - t0
+        active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
         v0 = np.zeros_like(mv)
         a0 = np.zeros_like(ma)
         v0[active] = mv[active] / m[active, None]
@@ -150,7 +151,6 @@ class Newmark(_Newton):
         v0[sim.fixed] = 0.0
         a0[sim.fixed] = 0.0
         sim.nodal = dict(mass=m, active=active)
-        sim.timers["p2g"] += time.perf_counter() - t0
 
         def accel(du):
             a1 = (du - dt * v0 - dt * dt * (0.5 - b) * a0) / (b * dt * dt)
