@@ -9,6 +9,7 @@ import numpy as np
 
 from .boundaries import Robin, RobinForms, Traction, TractionForms, fixed_dofs
 from .boundaries.robin import facets_on_boundary
+from .guards import check_particles
 from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
@@ -282,6 +283,7 @@ class Simulation:
         self.integrator.step(self, self.dt)
         self.t += self.dt
         self.step_count += 1
+        check_particles(self)
         for pr in self.probes:
             pr.record()
         for callback, every in self.observers:

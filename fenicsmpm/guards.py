@@ -1,0 +1,64 @@
+"""Always-on checks after each step (cheap: one read-only pass over the particles).
+
+A run either stays physical or stops with a message naming the step, the time, the field
+and the first offending particles (ids and positions), on every rank at once."""
+import numpy as np
+from numba import njit
+
+from .materials.piola import det3
+
+FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
+
+
+@njit(cache=True)
+def _scan(x, v, stress, F, V, V0, vol_tol, bad_out):
+    """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0),
+    6 (volume below vol_tol V0). Returns the number of bad particles."""
+    n_bad = 0
+    d = x.shape[1]
+    for p in range(x.shape[0]):
+        code = 0
+        for k in range(d):
+            if not np.isfinite(x[p, k]):
+                code = 1
+            elif not np.isfinite(v[p, k]):
+                code = 2
+        if code == 0:
+            for i in range(3):
+                for j in range(3):
+                    if not np.isfinite(stress[p, i, j]):
+                        code = 3
+                    elif not np.isfinite(F[p, i, j]):
+                        code = 4
+        if code == 0:
+            if det3(F[p]) <= 0.0:
+                code = 5
+            elif V[p] < vol_tol * V0[p]:
+                code = 6
+        bad_out[p] = code
+        if code:
+            n_bad += 1
+    return n_bad
+
+
+def check_particles(sim, vol_tol=1e-6):
+    """Raise FloatingPointError (non-finite state) or RuntimeError (inverted or collapsed
+    particles) naming step, time, field and the first offending particles."""
+    p = sim.particles
+    bad = np.empty(len(p), dtype=np.int8)
+    n_bad = _scan(p.x, p.v, p.stress, p.F, p.V, p.V0, vol_tol, bad)
+    if sim.comm.size > 1:
+        n_bad = sim.comm.allreduce(n_bad)
+    if n_bad == 0:
+        return
+    idx = np.flatnonzero(bad)[:5]
+    local = [(int(p.id[i]), tuple(np.round(p.x[i], 6)), int(bad[i])) for i in idx]
+    everyone = sim.comm.allgather(local) if sim.comm.size > 1 else [local]
+    first = sorted(r for part in everyone for r in part)[:5]
+    code = first[0][2]
+    what = (f"non-finite {FIELD_NAMES[code - 1]}" if code <= 4 else
+            "inverted particle (det F <= 0)" if code == 5 else
+            f"collapsed particle volume (V < {vol_tol:g} V0)")
+    msg = (f"step {sim.step_count}, t = {sim.t:.6g}: {what} in {n_bad} particle(s); first ids "
+           f"{[r[0] for r in first]} at {[r[1] for r in first]}")
+    raise (FloatingPointError if code <= 4 else RuntimeError)(msg)
