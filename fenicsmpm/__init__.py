@@ -10,7 +10,7 @@ from .grid import Grid
 from .particles import Particles
 from .materials import LinearElastic, NeoHookean
 from .integrators import Explicit, Newmark, QuasiStatic
-from .boundaries import Robin, Viscous, Viscoelastic
+from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .simulation import Simulation, Probe, Output
 
 __version__ = "0.1.0"
@@ -35,4 +35,4 @@ def _abort_all_ranks_on_uncaught_exception():
 
 _abort_all_ranks_on_uncaught_exception()
 __all__ = ["Grid", "Particles", "LinearElastic", "NeoHookean", "Explicit", "Newmark",
-           "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic"]
+           "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic", "ParticleLayer"]

@@ -9,13 +9,10 @@ claims have left the global domain and are reported, never dropped silently. On 
 this module is never called."""
 import numpy as np
 
-from .particles import FIELDS
 
 
 def _pack(p, sel):
-    out = {name: getattr(p, name)[sel] for name in FIELDS}
-    out["state"] = p.state[sel]
-    return out
+    return {name: getattr(p, name)[sel] for name in p.field_names()}
 
 
 def neighbourhood(grid):
@@ -72,7 +69,7 @@ def migrate(p):
     stay = np.flatnonzero(dest == rank)
     n_stay = len(stay)
     parts = [_pack(p, stay)] + [d for d in list(recv) + list(recv_far) if d is not None]
-    for name in list(FIELDS) + ["state"]:
+    for name in p.field_names():
         setattr(p, name, np.ascontiguousarray(np.concatenate([d[name] for d in parts])))
     if len(p) > n_stay:                              # locate arrivals in this rank's numbering
         c, xi = grid.locate(p.x[n_stay:])

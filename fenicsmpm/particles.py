@@ -20,7 +20,6 @@ FIELDS = {
     "V": (lambda d: (), np.float64),          # current volume
     "F": (lambda d: (3, 3), np.float64),      # deformation gradient (plane strain in 2D)
     "stress": (lambda d: (3, 3), np.float64), # Cauchy stress, tension positive
-    "stress_initial": (lambda d: (3, 3), np.float64),  # sigma_ini of a staged analysis
     "work": (lambda d: (), np.float64),       # accumulated stress work (strain energy) per particle
     "material_id": (lambda d: (), np.int32),
     "cell": (lambda d: (), np.int32),
@@ -71,6 +70,20 @@ class Particles:
         st = arrays.get("state")
         self.state = np.zeros((n, n_state)) if st is None else np.ascontiguousarray(st)
         self.version = 0          # bumped whenever particles are reshuffled (migration)
+        self.optional = []        # names of optional fields added with add_field
+
+    def add_field(self, name, trailing_shape=(), dtype=np.float64):
+        """Add an optional per-particle field (zeros), e.g. sigma_ini of a staged analysis or
+        the data of a particle-layer boundary. It migrates with the particles; scenes that do
+        not use a feature do not carry its fields. Returns the array."""
+        if not hasattr(self, name):
+            setattr(self, name, np.zeros((len(self),) + tuple(trailing_shape), dtype=dtype))
+            self.optional.append(name)
+        return getattr(self, name)
+
+    def field_names(self):
+        """Every per-particle array that moves with a particle (FIELDS, state, optional)."""
+        return list(FIELDS) + ["state"] + self.optional
 
     def __len__(self):
         return len(self.x)
@@ -162,6 +175,9 @@ class Particles:
             if not any(m is q for q in mats):
                 mats.append(m)
             remap[k] = next(i for i, q in enumerate(mats) if q is m)
+        if self.optional or other.optional:
+            raise ValueError("Particles: add particle sets before starting stages or adding "
+                             "particle-layer boundaries")
         arrays = {name: np.concatenate([getattr(self, name), getattr(other, name)])
                   for name in FIELDS}
         arrays["material_id"] = np.concatenate([self.material_id, remap[other.material_id]])

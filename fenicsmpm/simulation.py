@@ -7,7 +7,8 @@ import time
 
 import numpy as np
 
-from .boundaries import Robin, RobinForms, Traction, TractionForms, fixed_dofs
+from .boundaries import ParticleLayer, Robin, RobinForms, Traction, TractionForms, fixed_dofs
+from .boundaries import particle_layer as kl
 from .boundaries.robin import facets_on_boundary
 from .guards import check_particles
 from .io import ParticleWriter, Progress, ProbeWriter
@@ -51,6 +52,8 @@ class Simulation:
         self._traction_forms = None
         self.boundaries = []
         self._robin = None
+        self.layers = []
+        self._layer_version = None
         self.robin_u = np.zeros((grid.n_nodes, d))   # displacement seen by Robin boundaries
         self.initial_stress = False                  # internal force from sigma - sigma_ini
         self.stage_start = 0.0
@@ -117,7 +120,8 @@ class Simulation:
                                  f"{self.gdim}, got {gravity!r}")
             self.gravity = g
         self.initial_stress = bool(initial_stress)
-        p.stress_initial[:] = p.stress if initial_stress else 0.0
+        if initial_stress:
+            p.add_field("stress_initial", (3, 3))[:] = p.stress
         if reset_displacement:
             p.u[:] = 0.0
             self.robin_u[:] = 0.0
@@ -130,9 +134,14 @@ class Simulation:
         self._traction_forms = None
 
     def add_boundary(self, boundary):
-        """Add a Robin boundary (fm.Viscous, fm.Viscoelastic or a user fm.Robin law) on mesh
-        facets. Its displacement u is measured from the time it is added (nodal, integrated
-        from the grid velocity). The forms are compiled once, at the next step."""
+        """Add a Robin boundary: fm.Viscous, fm.Viscoelastic or a user fm.Robin law on mesh
+        facets, or an fm.ParticleLayer (the law on a layer of particles). Its displacement u
+        is measured from the time it is added. Mesh forms are compiled once, at the next step."""
+        if isinstance(boundary, ParticleLayer):
+            boundary.attach(self.particles)
+            self.layers.append(boundary)
+            self._layer_version = None
+            return
         if not isinstance(boundary, Robin):
             raise TypeError(f"add_boundary: expected fm.Robin, fm.Viscous or fm.Viscoelastic, "
                             f"got {type(boundary).__name__}")
@@ -148,6 +157,21 @@ class Simulation:
             self._robin = RobinForms(self.grid, self.boundaries, self.particles.materials,
                                      implicit=not self.integrator.explicit)
         return self._robin
+
+    def layer_particles(self):
+        """Indices of the particles in a particle-layer boundary (cached between migrations)."""
+        p = self.particles
+        if self._layer_version != (p.version, len(p)):
+            self._layer = np.flatnonzero(np.any(p.layer_an0 != 0.0, axis=1)).astype(np.int64)
+            self._layer_version = (p.version, len(p))
+        return self._layer
+
+    def layer_force(self, u_rel, v, out):
+        """out += local particle-layer tractions for particle displacements u_rel (since the
+        layer was added) and velocities v."""
+        p = self.particles
+        kl.layer_force(self.grid.D, self.layer_particles(), self.nodes, self.N, p.F,
+                       p.layer_an0, p.layer_coef, u_rel, v, out)
 
     def observe(self, callback, every=1):
         """Call callback(sim) after every `every` steps (energy monitors, custom output)."""

@@ -339,8 +339,7 @@ def particle_bytes(sim):
     """Bytes of per-particle arrays (the particle state plus the simulation's per-particle
     work arrays), summed over ranks."""
     p = sim.particles
-    from ..particles import FIELDS
-    arrays = [getattr(p, name) for name in FIELDS] + [p.state]
+    arrays = [getattr(p, name) for name in p.field_names()]
     arrays += [getattr(sim, a) for a in ("nodes", "N", "dN", "_dF", "_sigma_new")
                if isinstance(getattr(sim, a, None), np.ndarray)]
     b = int(sum(a.nbytes for a in arrays))

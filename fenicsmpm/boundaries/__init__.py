@@ -1,7 +1,8 @@
 """Boundary conditions on the grid: Dirichlet sets, UFL traction forms and Robin laws."""
 from .dirichlet import fixed_dofs
+from .particle_layer import ParticleLayer
 from .robin import Robin, RobinForms, Viscoelastic, Viscous
 from .traction import Traction, TractionForms
 
-__all__ = ["fixed_dofs", "Robin", "RobinForms", "Traction", "TractionForms", "Viscoelastic",
+__all__ = ["fixed_dofs", "ParticleLayer", "Robin", "RobinForms", "Traction", "TractionForms", "Viscoelastic",
            "Viscous"]

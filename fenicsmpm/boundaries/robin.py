@@ -29,12 +29,14 @@ SPRINGS = ("deeks-randolph", "kellezi", "virtual-layer")
 
 
 class Robin:
-    """A user Robin law: traction(u, v, n) -> UFL vector expression, on facets where(x)."""
+    """A user Robin law: traction(u, v, n) -> UFL vector expression, on facets where(x).
+
+    `where` may be None only for a law used by fm.ParticleLayer (which selects particles)."""
 
     def __init__(self, traction, where):
         if not callable(traction):
             raise TypeError("Robin: 'traction' must be callable traction(u, v, n) -> UFL expression")
-        if not callable(where):
+        if where is not None and not callable(where):
             raise TypeError("Robin: 'where' must be callable where(x) -> bool")
         self.traction, self.where = traction, where
 
@@ -70,7 +72,8 @@ class Viscous(Robin):
 
     rho, c_p, c_s come from the (single) material unless given."""
 
-    def __init__(self, where, a=1.0, b=1.0, density=None, p_wave_speed=None, s_wave_speed=None):
+    def __init__(self, where=None, a=1.0, b=1.0, density=None, p_wave_speed=None,
+                 s_wave_speed=None):
         _check_coefficient("Viscous", "a", a)
         _check_coefficient("Viscous", "b", b)
         for name, val in (("density", density), ("p_wave_speed", p_wave_speed),
@@ -100,7 +103,7 @@ class Viscoelastic(Viscous):
     k_s = rho c_s^2 / r_b) or "virtual-layer" (k_n = rho c_p^2 / delta, k_s = rho c_s^2 / delta).
     r_b is the distance from the source to the boundary; delta the virtual layer thickness."""
 
-    def __init__(self, where, r_b=None, delta=None, spring="deeks-randolph", **kw):
+    def __init__(self, where=None, r_b=None, delta=None, spring="deeks-randolph", **kw):
         super().__init__(where, **kw)
         if spring not in SPRINGS:
             raise ValueError(f"Viscoelastic: 'spring' must be one of {SPRINGS}, got {spring!r}")
@@ -127,6 +130,9 @@ class Viscoelastic(Viscous):
 
 def facets_on_boundary(grid, where, owner):
     """Exterior facets selected by where(x); ValueError if none anywhere."""
+    if where is None:
+        raise ValueError(f"{owner}: a mesh boundary needs 'where' (a facet locator); without it "
+                         f"use the law in fm.ParticleLayer")
     msh, gdim = grid.mesh, grid.gdim
     fdim = msh.topology.dim - 1
     msh.topology.create_connectivity(fdim, msh.topology.dim)

@@ -64,9 +64,12 @@ class Explicit:
         sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
         f += sim.external_force(sim.t, m)
-        if sim.robin is not None:                 # Robin tractions from the start-of-step state
+        if sim.robin is not None or sim.layers:    # Robin tractions from the start-of-step state
             fr = np.zeros_like(f)
-            sim.robin.force(sim.robin_u, v0, fr)
+            if sim.robin is not None:
+                sim.robin.force(sim.robin_u, v0, fr)
+            if sim.layers:
+                sim.layer_force(p.u - p.layer_u0, p.v, fr)
             grid.accumulate(fr)
             f += fr
         t1 = time.perf_counter()

@@ -16,6 +16,7 @@ import time
 
 import numpy as np
 
+from ..boundaries import particle_layer as kl
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
 from .linear_system import DEFAULT_PREFIX, LinearSystem
@@ -45,10 +46,11 @@ class _Newton:
         s = float(np.sum(own * own))
         return np.sqrt(sim.comm.allreduce(s) if sim.comm.size > 1 else s)
 
-    def solve_step(self, sim, dt, f_ext, m_coef, inertia, velocity=None, c_v=0.0):
+    def solve_step(self, sim, dt, f_ext, m_coef, inertia, velocity=None, c_v=0.0, v_start=None):
         """Newton loop for du. inertia(du) returns the nodal inertial force M a^{n+1}(du) (or 0);
         m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static); velocity(du) gives
-        the end-of-step nodal velocity, with dv/du = c_v, for the Robin boundaries.
+        the end-of-step nodal velocity, with dv/du = c_v, for the Robin boundaries; v_start is
+        the start-of-step nodal velocity (particle-layer velocities are updated FLIP-style).
 
         Converged when |R| <= rtol |f|, or when the last correction is below utol |du| with
         |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|, |R_0|);
@@ -80,9 +82,15 @@ class _Newton:
             grid.accumulate(fint)
             R = f_ext + fint - inertia(du)
             robin = sim.robin
-            if robin is not None:
+            if robin is not None or sim.layers:
                 fr = np.zeros_like(du)
-                robin.force(sim.robin_u + du, velocity(du), fr)
+                if robin is not None:
+                    robin.force(sim.robin_u + du, velocity(du), fr)
+                if sim.layers:
+                    u_rel, v_p = p.u - p.layer_u0, p.v.copy()
+                    kt.flip_blend(sim.grid.D, sim.nodes, sim.N, np.zeros_like(du), du, 1.0, u_rel)
+                    kt.flip_blend(sim.grid.D, sim.nodes, sim.N, v_start, velocity(du), 1.0, v_p)
+                    sim.layer_force(u_rel, v_p, fr)
                 grid.accumulate(fr)
                 R += fr
             R[cmask] = 0.0
@@ -104,7 +112,14 @@ class _Newton:
             for mat, gidx in sim.material_groups():
                 mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
             first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
-            sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained)
+            extra = None
+            if sim.layers:
+                def extra(data):
+                    kl.layer_tangent(sim.grid.D, sim.layer_particles(), sim.nodes, sim.N, p.F,
+                                     p.layer_an0, p.layer_coef, c_v, plan, sys.nodeptr,
+                                     constrained, data)
+            sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained,
+                         extra)
             if robin is not None:
                 own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)
                 sys.add(robin.tangent(sim.robin_u + du, velocity(du), c_v, own))
@@ -161,7 +176,7 @@ class Newmark(_Newton):
             return v0 + dt * ((1 - g) * a0 + g * accel(du))
 
         du = self.solve_step(sim, dt, f_ext, 1.0 / (b * dt * dt), lambda du: m[:, None] * accel(du),
-                             velocity, g / (b * dt))
+                             velocity, g / (b * dt), v0)
         t0 = time.perf_counter()
         a1 = accel(du)
         a1[sim.fixed] = 0.0
@@ -193,7 +208,8 @@ class QuasiStatic(_Newton):
         scale = min(1.0, (sim.step_count + 1) / self.load_steps)
         f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale)
         sim.nodal = dict(mass=m, active=sim.active_mask(m))
-        du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt)
+        du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt,
+                             np.zeros((grid.n_nodes, sim.gdim)))
         zero = np.zeros_like(du)
         kt.g2p(sim.grid.D, sim.nodes, sim.N, du, zero, zero, 1.0, p.x, p.v, p.u)
         p.v[:] = 0.0

@@ -74,10 +74,13 @@ class LinearSystem:
         kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
         return plan
 
-    def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained):
-        """Fill K = sum_p V_p B^T A_p B + diag(diag_add) with unit rows on constrained dofs."""
+    def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained, extra=None):
+        """Fill K = sum_p V_p B^T A_p B + diag(diag_add) with unit rows on constrained dofs;
+        extra(data), if given, adds further particle terms to the local CSR values."""
         self.data[:] = 0.0
         kt.assemble_stiffness(self.grid.D, nodes, dN, V, A4, plan, self.nodeptr, constrained, self.data)
+        if extra is not None:
+            extra(self.data)
         own = self.n_owned_dofs
         d = self.diag[:own]
         self.data[d] += np.where(constrained[:own], 1.0, diag_add[:own])
