@@ -34,14 +34,16 @@ taken out and reported on their own:
       a rank waits for the other one to arrive, so load imbalance shows up here.
 Both are measured by wrapping the methods with timers in the worker (on 1 rank they are a
 trivial check and a no-op). When no particle changes rank, migration is that reduction
-plus the wait for the slower rank. The time of Simulation.active_mask's gradient
-restriction, which the library adds to "shape" inside the integrators' "p2g" window, is
-also left out of p2g so that the stages do not overlap. Also: imbalance (max over mean of
+plus the wait for the slower rank. guards: the particle check at the end of
+Simulation.step (fenicsmpm.guards.check_particles, wrapped likewise; no stage timer
+covers it); other: the rest of the wall time. Also: imbalance (max over mean of
 particles per rank at the end; 1 = balanced), imbalance_start, cpu_utilization (CPU time
 of the measured steps over wall x ranks: < 1 means the ranks were starved by other load),
 migrated_particles (sent to another rank during the measured steps), and, before each
 launch, the 1-minute load average and the fraction of the cores busy during one second
-(cpu_busy_before: other work on the machine).
+(cpu_busy_before; full runs first wait up to 30 s for at most a quarter of the cores to be
+busy), and other_load_cores: the cores used by other processes during the measured steps
+(all busy cores from /proc/stat minus the run's own CPU time over its wall time).
 
 Targets (issue 4, reported, not asserted): explicit speed-up >= 1.6 on 2 ranks."""
 import argparse
@@ -86,7 +88,7 @@ QUICK = [
 
 # the stages of the stacked bars, in drawing order (exclusive times)
 BAR_STAGES = ("locate", "migration", "shape", "p2g", "exchange", "solve (residual)",
-              "assembly", "ksp", "g2p", "constitutive", "other")
+              "assembly", "ksp", "g2p", "constitutive", "guards", "other")
 
 REFUSAL = (f"benchmark case {CASE!r} launches its own mpirun (1 and 2 ranks) and must be "
            f"started serially: python -m fenicsmpm.bench {CASE}")
@@ -115,6 +117,43 @@ def scenes(quick=False, scale=1.0, steps=None, repeats=None):
 
 
 # ============================================================================ worker side
+def _proc_stat():
+    """(all jiffies, idle jiffies) of the whole machine from /proc/stat; None elsewhere."""
+    try:
+        with open("/proc/stat") as f:
+            v = [int(x) for x in f.readline().split()[1:]]
+        return sum(v[:8]), v[3] + (v[4] if len(v) > 4 else 0)
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _busy_cores(a, b):
+    """Cores busy on average between two _proc_stat() readings (None if unknown)."""
+    if a is None or b is None or b[0] <= a[0]:
+        return None
+    return (1.0 - (b[1] - a[1]) / (b[0] - a[0])) * (os.cpu_count() or 1)
+
+
+def _cpu_busy(seconds=1.0):
+    """Fraction of all cores busy during the next `seconds`: what other work occupies the
+    machine just before a launch (None where /proc/stat is missing)."""
+    a = _proc_stat()
+    time.sleep(seconds)
+    busy = _busy_cores(a, _proc_stat())
+    return None if busy is None else round(busy / (os.cpu_count() or 1), 3)
+
+
+def _wait_for_quiet(max_wait, threshold=0.25):
+    """Sample the machine every second until at most `threshold` of its cores are busy or
+    `max_wait` seconds have passed; (busy fraction of the last second, seconds waited)."""
+    t0 = time.perf_counter()
+    while True:
+        busy = _cpu_busy()
+        waited = time.perf_counter() - t0
+        if busy is None or busy <= threshold or waited >= max_wait:
+            return busy, round(waited, 1)
+
+
 _PROBE = collections.defaultdict(float)
 
 
@@ -147,23 +186,23 @@ def _install_probes():
             _PROBE["exchange_solve" if caller == "solve_step" else "exchange_p2g"] += dt
             _PROBE["exchange_calls"] += 1
 
-    # Simulation.active_mask adds its restrict_gradients time to timers["shape"], and the
-    # integrators call it inside their "p2g" window: that time is counted twice. Recorded
-    # here so that the exclusive p2g time can leave it out.
-    active_mask = fm.Simulation.active_mask
-
-    @functools.wraps(active_mask)
-    def active_mask_probe(self, m):
-        s0 = self.timers["shape"]
-        try:
-            return active_mask(self, m)
-        finally:
-            _PROBE["shape_in_p2g"] += self.timers["shape"] - s0
+    # the particle guard scan of Simulation.step (fenicsmpm.guards.check_particles), which no
+    # stage timer covers, where the library has it
+    from .. import simulation as sim_module
+    check = getattr(sim_module, "check_particles", None)
+    if check is not None:
+        @functools.wraps(check)
+        def check_particles(*a, **kw):
+            t0 = time.perf_counter()
+            try:
+                return check(*a, **kw)
+            finally:
+                _PROBE["guards"] += time.perf_counter() - t0
+        sim_module.check_particles = check_particles
 
     send_to_owners._bench_probe = True
     fm.Particles.send_to_owners = send_to_owners
     fm.Grid.accumulate = accumulate
-    fm.Simulation.active_mask = active_mask_probe
 
 
 def _reset_probes():
@@ -197,11 +236,16 @@ def _measure(spec, comm):
     for _ in range(spec["repeats"]):
         ids0 = p.id.copy()
         _reset_probes()
+        stat0 = _proc_stat() if comm.rank == 0 else None
         timing = common.time_steps(sim, steps)
+        # cores used by other processes during the measurement: all busy cores minus ours
+        busy = _busy_cores(stat0, _proc_stat()) if comm.rank == 0 else None
+        other = None if busy is None else max(busy - timing["cpu_s"] / timing["wall_s"], 0.0)
+        timing["other_cores"] = comm.bcast(other, root=0) if comm.size > 1 else other
         probe = dict(_PROBE)
         # particles that left this rank during the measured steps
         gone = int(np.count_nonzero(~np.isin(ids0, p.id)))
-        keys = ("migration", "exchange_p2g", "exchange_solve", "shape_in_p2g",
+        keys = ("migration", "exchange_p2g", "exchange_solve", "guards",
                 "migration_calls", "exchange_calls")
         vals = np.array([probe.get(k, 0.0) for k in keys] + [gone], dtype=float)
         if comm.size > 1:
@@ -219,11 +263,12 @@ def _measure(spec, comm):
         "locate": T["locate"] - pr["migration"],
         "migration": pr["migration"],
         "shape": T["shape"],
-        "p2g": T["p2g"] - pr["exchange_p2g"] - pr["shape_in_p2g"],
+        "p2g": T["p2g"] - pr["exchange_p2g"],
         "exchange": exch,
         "solve": T["solve"] - pr["exchange_solve"],
         "g2p": T["g2p"],
         "constitutive": T["constitutive"],
+        "guards": pr["guards"],
     }
     if implicit:
         excl["assembly"] = T["assembly"]
@@ -233,6 +278,8 @@ def _measure(spec, comm):
          "wall_per_step_median_s": float(np.median([r["wall_s"] for r in reps])) * per,
          "particle_updates_per_s": n_part * steps / wall,
          "cpu_s": best["cpu_s"], "cpu_utilization": best["cpu_s"] / (wall * comm.size)}
+    if best["other_cores"] is not None:
+        m["other_load_cores"] = best["other_cores"]
     for k, v in excl.items():
         m[f"t_{k}"] = v * per
         m[f"frac_{k}"] = v / wall
@@ -250,6 +297,7 @@ def _measure(spec, comm):
     rec["scene"] = spec["name"]
     rec["ranks"] = comm.size
     rec["wall_per_step_repeats_s"] = [r["wall_s"] * per for r in reps]
+    rec["other_load_cores_repeats"] = [r["other_cores"] for r in reps]
     if implicit:
         sim.integrator.system.destroy()
     return rec
@@ -302,23 +350,6 @@ def _child_env():
     for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
         env.setdefault(k, "1")
     return env
-
-
-def _cpu_busy(seconds=1.0):
-    """Fraction of all cores busy over the next `seconds` (Linux /proc/stat; None elsewhere):
-    what other work occupies the machine just before a launch."""
-    def read():
-        with open("/proc/stat") as f:
-            v = [int(x) for x in f.readline().split()[1:]]
-        idle = v[3] + (v[4] if len(v) > 4 else 0)
-        return sum(v[:8]), idle
-    try:
-        t0, i0 = read()
-        time.sleep(seconds)
-        t1, i1 = read()
-    except (OSError, ValueError, IndexError):
-        return None
-    return round(1.0 - (i1 - i0) / (t1 - t0), 3) if t1 > t0 else None
 
 
 def launch_command(n, spec_path, result_path, mpirun=None):
@@ -415,11 +446,13 @@ def plot(doc, path, comm):
             if r["ranks"] > 1:
                 text += (f"\nspeed-up {m['speedup']:.2f}x\nefficiency {100 * m['efficiency']:.0f} %"
                          f"\nimbalance {m['imbalance']:.3f}")
+            if m.get("other_load_cores") is not None:
+                text += f"\nothers' load {m['other_load_cores']:.2f} cores"
             ann.append(text)
         top = common.stacked_bars(ax, labels, _bar_stacks(runs), ann,
                                   ylabel="time per step [s]", colors={"other": "lightgray"},
                                   legend="outside" if j == len(scenes_) - 1 else None)
-        ax.set_ylim(0, 1.45 * max(float(np.max(top)), 1e-12))     # room for 4 lines of text
+        ax.set_ylim(0, 1.5 * max(float(np.max(top)), 1e-12))      # room for 5 lines of text
         r0 = runs[0]
         ax.set_title(f"{scene}: {r0['n_particles']:,} particles", fontsize=9)
         if scene.startswith("explicit"):
@@ -442,15 +475,17 @@ def print_report(doc, comm):
             ("imbalance", lambda r: r["metrics"]["imbalance"]),
             ("cpu/wall", lambda r: r["metrics"]["cpu_utilization"]),
             ("load before", lambda r: r.get("load_average_1min_before")),
-            ("busy before", lambda r: r.get("cpu_busy_before"))]
+            ("busy before", lambda r: r.get("cpu_busy_before")),
+            ("others' cores", lambda r: r["metrics"].get("other_load_cores"))]
     common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
                        f"{' (quick)' if doc['quick'] else ''} (migration, exchange: fraction "
                        f"of the step time; load: 1-minute load average, busy: fraction of the cores busy in the "
-                       f"second before the launch)")
+                       f"second before the launch; others' cores: cores used by other processes "
+                       f"during the measured steps)")
     stage_cols = [("run", "name")] + [
         (k, (lambda k: lambda r: r["metrics"].get(f"frac_{k}"))(k))
         for k in ("locate", "migration", "shape", "p2g", "exchange", "solve", "assembly", "ksp",
-                  "g2p", "constitutive", "other")]
+                  "g2p", "constitutive", "guards", "other")]
     common.print_table(doc["runs"], stage_cols, comm, title="fraction of the step time per stage "
                        "(exclusive; assembly and ksp are parts of solve)")
     starved = [r["name"] for r in doc["runs"] if r["metrics"]["cpu_utilization"] < 0.9]
@@ -472,6 +507,7 @@ def _combine(records):
     best = dict(min(records, key=lambda r: r["metrics"]["wall_per_step_s"]))
     reps = [t for r in records for t in r["wall_per_step_repeats_s"]]
     best["wall_per_step_repeats_s"] = reps
+    best["other_load_cores_repeats"] = [x for r in records for x in r["other_load_cores_repeats"]]
     best["metrics"] = dict(best["metrics"], wall_per_step_median_s=float(np.median(reps)),
                            rounds=len(records))
     best["load_average_1min_before_rounds"] = [r["load_average_1min_before"] for r in records]
@@ -480,13 +516,15 @@ def _combine(records):
 
 
 def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repeats=None,
-        rounds=None, ranks=RANKS, verbose=True, timeout=None):
+        rounds=None, ranks=RANKS, max_wait=None, verbose=True, timeout=None):
     """Launch the workers, write out/mpi-scaling.json and out/mpi-scaling.png, print the
     table; returns the result dict.
 
     The launches alternate between the rank counts, `rounds` times (default 2, quick 1), so
     that a burst of other load on the machine does not hit only one rank count; each
     (scene, ranks) reports its fastest repetition over all rounds.
+    Before each launch it waits (at most `max_wait` seconds: default 30, quick 0) until at
+    most a quarter of the cores are busy with other work.
     Must run serially (RuntimeError under an MPI size > 1) with `mpirun` on PATH."""
     from mpi4py import MPI
     comm = MPI.COMM_WORLD if comm is None else comm
@@ -502,6 +540,7 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     rounds = (1 if quick else 2) if rounds is None else rounds
     if not (isinstance(rounds, int) and rounds >= 1):
         raise ValueError(f"{CASE}: 'rounds' must be a positive integer, got {rounds!r}")
+    max_wait = (0.0 if quick else 30.0) if max_wait is None else float(max_wait)
     specs = scenes(quick, scale, steps, repeats)
     if timeout is None:
         timeout = 600.0 if quick else 3600.0
@@ -517,7 +556,8 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
             for n in ranks:
                 result_path = os.path.join(tmpdir, f"result_{k}_{n}.json")
                 cmd = launch_command(n, spec_path, result_path, mpirun)
-                load, busy = common._load_average(), _cpu_busy()
+                busy, waited = _wait_for_quiet(max_wait)
+                load = common._load_average()
                 if verbose:
                     common.say(comm, f"[{CASE}] round {k + 1}/{rounds}, {n} rank(s), load "
                                f"average {load}, cores busy before {busy}: {shlex.join(cmd)}")
@@ -532,6 +572,7 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
                 libs.add(res["mpi_library"])
                 launches.append(dict(round=k + 1, ranks=n, launch_wall_s=time.perf_counter() - t0,
                                      load_average_1min_before=load, cpu_busy_before=busy,
+                                     waited_for_quiet_s=waited,
                                      load_average_1min_after=res["machine"]["load_average_1min"]))
     finally:
         shutil.rmtree(tmpdir, ignore_errors=True)
@@ -539,6 +580,7 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     scaling = _scaling(runs)
     cmd = shlex.join(launch_command(2, "SPEC", "RESULT", mpirun))
     doc = common.result(CASE, runs, comm, quick=quick, scale=scale, rounds=rounds,
+                        max_wait_for_quiet_s=max_wait,
                         targets=TARGETS, scaling=scaling, launches=launches,
                         launch=dict(command=cmd, mpi_library=sorted(libs)),
                         environment={k: env[k] for k in sorted(env) if k.startswith(

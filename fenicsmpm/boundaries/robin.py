@@ -166,18 +166,24 @@ class RobinForms:
         nrm = ufl.FacetNormal(msh)
         L = sum(ufl.inner(bc.bind(materials)(self.u, self.v, nrm), w) * ds(k + 1)
                 for k, bc in enumerate(boundaries))
-        self.L = fem.form(L)
+        # a law that is identically zero (e.g. a = b = 0) leaves an empty form: no force
+        L = ufl.algorithms.expand_derivatives(L)
+        self.L = None if L.empty() else fem.form(L)
         self._buf = np.zeros(grid.n_nodes * gdim)
         self.J = self.B = None
-        if implicit:
+        if implicit and self.L is not None:
             du = ufl.TrialFunction(grid.V)
             self.c_v = fem.Constant(msh, PETSc.ScalarType(0.0))
-            J = -(ufl.derivative(L, self.u, du) + self.c_v * ufl.derivative(L, self.v, du))
-            self.J = fem.form(J)
-            self.B = dolfinx.fem.petsc.create_matrix(self.J)
+            J = ufl.algorithms.expand_derivatives(
+                -(ufl.derivative(L, self.u, du) + self.c_v * ufl.derivative(L, self.v, du)))
+            if not J.empty():
+                self.J = fem.form(J)
+                self.B = dolfinx.fem.petsc.create_matrix(self.J)
 
     def force(self, u, v, out):
         """out += local Robin nodal forces for boundary displacement u and velocity v."""
+        if self.L is None:
+            return
         self.u.x.array[:] = u.ravel()
         self.v.x.array[:] = v.ravel()
         self._buf[:] = 0.0
@@ -185,7 +191,10 @@ class RobinForms:
         out += self._buf.reshape(out.shape)
 
     def tangent(self, u, v, c_v, constrained_owned_dofs):
-        """-dF/du (with dv/du = c_v) as a PETSc matrix, constrained rows/columns zeroed."""
+        """-dF/du (with dv/du = c_v) as a PETSc matrix, constrained rows/columns zeroed; None
+        when the law does not depend on u or v."""
+        if self.J is None:
+            return None
         self.u.x.array[:] = u.ravel()
         self.v.x.array[:] = v.ravel()
         self.c_v.value = c_v

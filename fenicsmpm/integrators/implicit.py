@@ -46,23 +46,25 @@ class _Newton:
         s = float(np.sum(own * own))
         return np.sqrt(sim.comm.allreduce(s) if sim.comm.size > 1 else s)
 
-    def solve_step(self, sim, dt, f_ext, m_coef, inertia, velocity=None, c_v=0.0, v_start=None):
+    def solve_step(self, sim, dt, f_ext, m_coef, inertia, velocity=None, c_v=0.0, v_start=None,
+                   du0=None, force_scale=0.0):
         """Newton loop for du. inertia(du) returns the nodal inertial force M a^{n+1}(du) (or 0);
         m_coef is the mass-matrix factor 1/(beta dt^2) (0 for quasi-static); velocity(du) gives
         the end-of-step nodal velocity, with dv/du = c_v, for the Robin boundaries; v_start is
         the start-of-step nodal velocity (particle-layer velocities are updated FLIP-style).
 
         Converged when |R| <= rtol |f|, or when the last correction is below utol |du| with
-        |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|, |R_0|);
-        the initial residual R_0 carries the inertial load when f_ext and f_int vanish
-        (rigid motion)."""
+        |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|, |R_0|,
+        force_scale): the initial residual R_0 and force_scale (|M v^n| / dt + |M a^n| for
+        Newmark) carry the inertial load when f_ext and f_int vanish (rigid motion), also when
+        the predictor du0 is already exact."""
         p, grid, T, sys = sim.particles, sim.grid, sim.timers, self.system
         n = len(p)
         d = sim.gdim
         m = sim.nodal["mass"]
         constrained = (sim.fixed | ~sim.nodal["active"][:, None]).ravel()
         cmask = constrained.reshape(-1, d)
-        du = np.zeros((grid.n_nodes, d))
+        du = np.zeros((grid.n_nodes, d)) if du0 is None else np.where(cmask, 0.0, du0)
         t0 = time.perf_counter()
         plan = sys.plan(sim.nodes)
         T["assembly"] += time.perf_counter() - t0
@@ -97,7 +99,8 @@ class _Newton:
             rnorm = self._norm(sim, R)
             if it == 0:
                 r0 = rnorm
-            scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), r0, 1e-300)
+            scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), r0, force_scale,
+                        1e-300)
             T["solve"] += time.perf_counter() - t1
             if not np.isfinite(rnorm):
                 raise FloatingPointError(f"step {sim.step_count}, t = {sim.t:.6g}: non-finite "
@@ -122,7 +125,9 @@ class _Newton:
                          extra)
             if robin is not None:
                 own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)
-                sys.add(robin.tangent(sim.robin_u + du, velocity(du), c_v, own))
+                B = robin.tangent(sim.robin_u + du, velocity(du), c_v, own)
+                if B is not None:
+                    sys.add(B)
             t3 = time.perf_counter()
             delta = sys.solve(R)
             du += delta
@@ -175,8 +180,11 @@ class Newmark(_Newton):
         def velocity(du):
             return v0 + dt * ((1 - g) * a0 + g * accel(du))
 
+        # predictor: constant acceleration (a^{n+1} = a^n, v^{n+1} = v^n + dt a^n)
         du = self.solve_step(sim, dt, f_ext, 1.0 / (b * dt * dt), lambda du: m[:, None] * accel(du),
-                             velocity, g / (b * dt), v0)
+                             velocity, g / (b * dt), v0, du0=dt * v0 + 0.5 * dt * dt * a0,
+                             force_scale=self._norm(sim, m[:, None] * v0) / dt
+                             + self._norm(sim, m[:, None] * a0))
         t0 = time.perf_counter()
         a1 = accel(du)
         a1[sim.fixed] = 0.0
