@@ -155,7 +155,7 @@ class Grid:
             return out, xi
         s = self._structured
         if s is not None:
-            ks.locate_structured(self.kind, x, s["origin"], s["spacing"], s["nbox"], s["table"],
+            ks.locate_structured(self.D, self.kind, x, s["origin"], s["spacing"], s["nbox"], s["table"],
                                  self.cell_nodes, self.node_x, self.affine_Jinv, out, xi)
             return out, xi
         inside = np.zeros(n, dtype=np.bool_)

@@ -147,13 +147,13 @@ def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_ou
 
 
 @njit(cache=True)
-def locate_structured(kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
                       affine_Jinv, cells_out, xi_out):
     """O(1) location on a structured grid of boxes (rectangles or boxes split into cells).
 
     The box index is found by arithmetic, then the (at most 6) cells of that box are tested.
-    Points outside every local box get cell -1."""
-    d = x.shape[1]
+    Points outside every local box get cell -1. D: tuple of length gdim (compile-time)."""
+    d = len(D)
     nv = cell_nodes.shape[1]
     N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
     for p in range(x.shape[0]):
@@ -225,7 +225,7 @@ def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
                 for k in range(d):
                     dN_out[p, a, k] = simplex_grad[c, a, k]
             continue
-        _q1_basis(xi[p], d, Nq, dNq)
+        _q1_basis(xi[p], len(D), Nq, dNq)
         if affine_Jinv.shape[0] > 0:
             for i in range(d):
                 for j in range(d):
