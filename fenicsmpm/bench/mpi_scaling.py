@@ -450,7 +450,8 @@ def plot(doc, path, comm):
                 text += f"\nothers' load {m['other_load_cores']:.2f} cores"
             ann.append(text)
         top = common.stacked_bars(ax, labels, _bar_stacks(runs), ann,
-                                  ylabel="time per step [s]", colors={"other": "lightgray"},
+                                  ylabel="time per step [s]",
+                                  colors={"other": "lightgray", "guards": "darkslategray"},
                                   legend="outside" if j == len(scenes_) - 1 else None)
         ax.set_ylim(0, 1.5 * max(float(np.max(top)), 1e-12))      # room for 5 lines of text
         r0 = runs[0]
