@@ -62,7 +62,7 @@ class Simulation:
         self.nodal = {}
         self.stats = {}
         self.timers = dict(locate=0.0, shape=0.0, p2g=0.0, solve=0.0, g2p=0.0, constitutive=0.0,
-                           assembly=0.0, ksp=0.0)
+                           guards=0.0, assembly=0.0, ksp=0.0)
         self._n_alloc = -1
         self._all = np.zeros(0, dtype=np.int64)
         integrator.setup(self)
@@ -307,7 +307,9 @@ class Simulation:
         self.integrator.step(self, self.dt)
         self.t += self.dt
         self.step_count += 1
+        t0 = time.perf_counter()
         check_particles(self)
+        self.timers["guards"] += time.perf_counter() - t0
         for pr in self.probes:
             pr.record()
         for callback, every in self.observers:

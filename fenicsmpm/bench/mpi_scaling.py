@@ -35,8 +35,7 @@ taken out and reported on their own:
 Both are measured by wrapping the methods with timers in the worker (on 1 rank they are a
 trivial check and a no-op). When no particle changes rank, migration is that reduction
 plus the wait for the slower rank. guards: the particle check at the end of
-Simulation.step (fenicsmpm.guards.check_particles, wrapped likewise; no stage timer
-covers it); other: the rest of the wall time. Also: imbalance (max over mean of
+Simulation.step (its "guards" stage timer); other: the rest of the wall time. Also: imbalance (max over mean of
 particles per rank at the end; 1 = balanced), imbalance_start, cpu_utilization (CPU time
 of the measured steps over wall x ranks: < 1 means the ranks were starved by other load),
 migrated_particles (sent to another rank during the measured steps), and, before each
@@ -186,19 +185,6 @@ def _install_probes():
             _PROBE["exchange_solve" if caller == "solve_step" else "exchange_p2g"] += dt
             _PROBE["exchange_calls"] += 1
 
-    # the particle guard scan of Simulation.step (fenicsmpm.guards.check_particles), which no
-    # stage timer covers, where the library has it
-    from .. import simulation as sim_module
-    check = getattr(sim_module, "check_particles", None)
-    if check is not None:
-        @functools.wraps(check)
-        def check_particles(*a, **kw):
-            t0 = time.perf_counter()
-            try:
-                return check(*a, **kw)
-            finally:
-                _PROBE["guards"] += time.perf_counter() - t0
-        sim_module.check_particles = check_particles
 
     send_to_owners._bench_probe = True
     fm.Particles.send_to_owners = send_to_owners
@@ -245,8 +231,7 @@ def _measure(spec, comm):
         probe = dict(_PROBE)
         # particles that left this rank during the measured steps
         gone = int(np.count_nonzero(~np.isin(ids0, p.id)))
-        keys = ("migration", "exchange_p2g", "exchange_solve", "guards",
-                "migration_calls", "exchange_calls")
+        keys = ("migration", "exchange_p2g", "exchange_solve", "migration_calls", "exchange_calls")
         vals = np.array([probe.get(k, 0.0) for k in keys] + [gone], dtype=float)
         if comm.size > 1:
             vals = comm.allreduce(vals)
@@ -268,7 +253,7 @@ def _measure(spec, comm):
         "solve": T["solve"] - pr["exchange_solve"],
         "g2p": T["g2p"],
         "constitutive": T["constitutive"],
-        "guards": pr["guards"],
+        "guards": T["guards"],
     }
     if implicit:
         excl["assembly"] = T["assembly"]
