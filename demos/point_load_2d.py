@@ -13,7 +13,7 @@ Load: a line load P(t) = 300 kN/m * sin^2(pi t / 0.5 s) for 0 <= t <= 0.5 s (zer
 peak at t = 0.25 s, impulse 75 kN s/m), shared equally by the top-row particles within
 b = 0.2 m of the symmetry axis (2 particles in --quick, 8 at dx = 0.05 m; equivalent to a
 pressure P / b, 1.5 MPa at the peak) and passed to the grid through their shape functions
-(ParticleLoad below; the thesis also applies its point load "to the top 2 material points"
+(`sim.add_particle_load`; the thesis also applies its point load "to the top 2 material points"
 of an element). It is not a facet traction (fm's sim.add_traction) because those act on
 fixed mesh facets: at dx = 0.05 m the loaded particles sink out of the top cell row by
 t ~ 0.15 s, the loaded nodes lose their mass, the load is dropped, particles invert and
@@ -96,40 +96,6 @@ def line_load(t):
     return P_PEAK * math.sin(math.pi * t / T_LOAD) ** 2 if 0.0 <= t <= T_LOAD else 0.0
 
 
-class ParticleLoad:
-    """A force per unit thickness value(t) [N/m], shared equally by the particles selected by
-    region(x) at set-up, added to the grid as f_i += sum_p N_ip f_p (the load follows the
-    material, like the thesis's point load "applied to the top 2 material points").
-
-    The library has no particle load: fm's tractions act on fixed mesh facets, and at
-    dx = 0.05 m the loaded particles move out of the top cell row (u > dx / 4 by t ~ 0.15 s),
-    the loaded nodes lose their mass and the load is dropped (Newton then fails at
-    t = 0.17 s). This wraps sim.external_force (the integrators call it once per step, after
-    the shape functions are evaluated, on every rank)."""
-
-    def __init__(self, sim, region, value):
-        p = sim.particles
-        sel = np.asarray(region(p.x), dtype=bool)
-        self.ids = np.concatenate(comm.allgather(p.id[sel]))     # they may migrate
-        self.n = len(self.ids)
-        if self.n == 0:
-            raise ValueError("ParticleLoad: 'region' selects no particle")
-        self.sim, self.value = sim, value
-        self._external = sim.external_force
-        sim.external_force = self.external_force
-
-    def external_force(self, t, m, gravity_scale=1.0):
-        f = self._external(t, m, gravity_scale)
-        sim = self.sim
-        fl = np.zeros_like(f)
-        sel = np.flatnonzero(np.isin(sim.particles.id, self.ids))
-        fp = np.asarray(self.value(t), dtype=np.float64) / self.n
-        for k in range(sim.gdim):
-            np.add.at(fl[:, k], sim.nodes[sel].ravel(), (sim.N[sel] * fp[k]).ravel())
-        sim.grid.accumulate(fl)
-        return f + fl
-
-
 def build(base, dx):
     """The W4 scene for one boundary type. Returns (sim, info)."""
     n = int(round(L / dx))
@@ -149,18 +115,19 @@ def build(base, dx):
     right = lambda x: np.abs(x[:, 0] - L) < tol
     bottom = lambda x: np.abs(x[:, 1]) < tol
     sim.fix(left, [0])
-    load = ParticleLoad(sim, region=lambda x: (x[:, 1] > L - 0.5 * dx) & (x[:, 0] < WIDTH),
-                        value=lambda t: (0.0, -line_load(t)))
+    # the load follows the material: shared by the top particles near the axis (a facet
+    # traction is lost once they sink out of the top cell row)
+    n_loaded = sim.add_particle_load(region=lambda x: (x[:, 1] > L - 0.5 * dx) & (x[:, 0] < WIDTH),
+                                     value=lambda t: (0.0, -line_load(t)))
     if base == "fixed":
         sim.fix(bottom)
         sim.fix(right, [0])
     else:
         law = (lambda: fm.Viscous()) if base == "viscous" else (lambda: fm.Viscoelastic(r_b=R_B))
         # the outermost particle row / column (particles sit at dx/4 from the cell edges);
-        # the corner particle is in the right-side layer only (a particle keeps the data of
-        # the last layer that selects it)
-        sim.add_boundary(fm.ParticleLayer(law(), region=lambda x: x[:, 1] < 0.5 * dx,
-                                          normal=(0.0, -1.0)))
+        # the corner particle is in the right-side layer only (a particle carries one layer)
+        sim.add_boundary(fm.ParticleLayer(law(), normal=(0.0, -1.0),
+                                          region=lambda x: (x[:, 1] < 0.5 * dx) & (x[:, 0] < L - 0.5 * dx)))
         sim.add_boundary(fm.ParticleLayer(law(), region=lambda x: x[:, 0] > L - 0.5 * dx,
                                           normal=(1.0, 0.0)))
     # probes by initial position: the surface particle under the load, the bottom particle
@@ -168,7 +135,7 @@ def build(base, dx):
     top = sim.probe((0.0, L), ["displacement"])
     bot = sim.probe((0.0, BOTTOM_Y), ["stress"])
     p = sim.particles
-    info = dict(top=top, bottom=bot, snapshots={}, row_peak=[0.0], n_loaded=load.n)
+    info = dict(top=top, bottom=bot, snapshots={}, row_peak=[0.0], n_loaded=n_loaded)
     # the particle row nearest BOTTOM_Y (the same particles in every run)
     y = p.x[:, 1]
     near = np.min(np.abs(y - BOTTOM_Y)) if len(p) else np.inf

@@ -4,6 +4,7 @@ Stages (DESIGN.md): locate -> shape -> P2G -> grid solve (the integrator) -> G2P
 constitutive update. The integrator decides the order; the stage functions live here."""
 import math
 import time
+import warnings
 
 import numpy as np
 
@@ -50,6 +51,8 @@ class Simulation:
         self.fixed = np.zeros((grid.n_nodes, d), dtype=bool)
         self.tractions = []
         self._traction_forms = None
+        self._warned_traction = False
+        self.particle_loads = []
         self.boundaries = []
         self._robin = None
         self.layers = []
@@ -87,6 +90,34 @@ class Simulation:
 
         A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1])."""
         self.fixed |= fixed_dofs(self.grid, where, components)
+
+    def add_particle_load(self, region, value):
+        """A force value(t) (a vector; per unit thickness in 2D) shared equally by the particles
+        selected by region(x) now, mapped to the grid with their shape functions,
+        f_i += sum_p N_ip value(t) / n. Unlike a facet traction it follows the material (the
+        thesis's point load "applied to the top material points"). Returns the global number
+        of loaded particles."""
+        if not (callable(region) and (callable(value) or np.ndim(value) == 1)):
+            raise TypeError("add_particle_load: need region(x) -> bool and a vector or t -> vector")
+        p = self.particles
+        sel = np.asarray(region(p.x), dtype=bool)
+        n = int(np.count_nonzero(sel))
+        n = self.comm.allreduce(n) if self.comm.size > 1 else n
+        if n == 0:
+            raise ValueError("add_particle_load: 'region' selects no particle")
+        name = f"load_share_{len(self.particle_loads)}"
+        p.add_field(name)[sel] = 1.0 / n
+        self.particle_loads.append((name, Traction(lambda x: True, value)))
+        return n
+
+    def _particle_load_force(self, t, out):
+        p = self.particles
+        for name, load in self.particle_loads:
+            share = getattr(p, name)
+            sel = np.flatnonzero(share)
+            if len(sel):
+                vec = np.ascontiguousarray(np.broadcast_to(load.at(t, self.gdim), (len(sel), self.gdim)))
+                kt.p2g_weighted(self.grid.D, self.nodes[sel], self.N[sel], share[sel], vec, out)
 
     def release(self, where=None, components=None):
         """Remove Dirichlet conditions at nodes where(x) (default: everywhere) on the given
@@ -247,9 +278,11 @@ class Simulation:
         self.timers["shape"] += time.perf_counter() - t0
         return active
 
-    def external_force(self, t, m, gravity_scale=1.0):
+    def external_force(self, t, m, gravity_scale=1.0, active=None):
         """Nodal external force, already summed over ranks: gravity sum_p N_ip m_p g = m_i g
-        (m: the summed nodal mass) plus the traction forms at time t."""
+        (m: the summed nodal mass) plus the traction forms at time t. With `active`, warns
+        (once) when traction lands on nodes without mass: the mesh facets no longer touch
+        the material there and that part of the load is lost."""
         f = m[:, None] * (gravity_scale * self.gravity)
         if self.tractions:
             if self._traction_forms is None:
@@ -258,6 +291,22 @@ class Simulation:
             self._traction_forms.assemble(t, ft)
             self.grid.accumulate(ft)
             f += ft
+            if active is not None and not self._warned_traction:
+                lost = float(np.abs(ft[~active]).sum())
+                if self.comm.size > 1:
+                    lost = self.comm.allreduce(lost)
+                if lost > 1e-12 * max(float(np.abs(ft).sum()), 1e-300):
+                    self._warned_traction = True
+                    if self.comm.rank == 0:
+                        warnings.warn(f"step {self.step_count}, t = {self.t:.6g}: part of a traction "
+                                      f"acts on grid nodes without material (the material left the "
+                                      f"loaded facets); that part of the load is lost",
+                                      RuntimeWarning, stacklevel=2)
+        if self.particle_loads:
+            fl = np.zeros_like(f)
+            self._particle_load_force(t, fl)
+            self.grid.accumulate(fl)
+            f += fl
         return f
 
     def dynamic_stress(self, stress):

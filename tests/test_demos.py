@@ -4,13 +4,14 @@ Each demo's `main(argv)` is called in-process (so it shares the MPI world with p
 returns its metrics on every rank. Tolerances: vibrating bar period within 1 % (explicit)
 and 3 % (implicit Newmark at 5x the critical step); self-weight column mid-depth stress
 within 2 % and top settlement within 3 %."""
-import importlib.util
 import os
 import re
 from pathlib import Path
 
 import pytest
 from mpi4py import MPI
+
+from demo_helpers import exist_on_rank0, load_demo
 
 ROOT = Path(__file__).resolve().parents[1]
 comm = MPI.COMM_WORLD
@@ -19,20 +20,6 @@ comm = MPI.COMM_WORLD
 @pytest.fixture(scope="module")
 def demo_dir(shared_module_tmp_path):
     return shared_module_tmp_path
-
-
-def load_demo(name):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", ROOT / "demos" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def exist_on_rank0(*paths):
-    """Whether all paths exist, checked on rank 0 after every rank finished writing."""
-    comm.barrier()
-    ok = all(os.path.isfile(p) for p in paths) if comm.rank == 0 else None
-    return comm.bcast(ok, root=0)
 
 
 def test_vibrating_bar_demo(demo_dir):

@@ -8,36 +8,22 @@ W4 point load (dx = 0.2 m, Newmark): the absorbing far fields lower the peak ver
 near the bottom below the load (fixed / absorbing > 1.5; the thesis reports ~3) and the
 viscous one leaves the model displaced after the pulse while the viscoelastic one brings
 it back."""
-import importlib.util
 import json
 import os
-from pathlib import Path
 
 import pytest
 from mpi4py import MPI
 
+from demo_helpers import exist_on_rank0, load_demo
+
 from fenicsmpm.bench import absorbing
 
-ROOT = Path(__file__).resolve().parents[1]
 comm = MPI.COMM_WORLD
 
 
 @pytest.fixture(scope="module")
 def out_dir(shared_module_tmp_path):
     return shared_module_tmp_path
-
-
-def load_demo(name):
-    spec = importlib.util.spec_from_file_location(f"demo_{name}", ROOT / "demos" / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-def exist_on_rank0(*paths):
-    comm.barrier()
-    ok = all(os.path.isfile(p) for p in paths) if comm.rank == 0 else None
-    return comm.bcast(ok, root=0)
 
 
 def test_column_pulse_demo(out_dir):

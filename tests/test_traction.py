@@ -64,3 +64,40 @@ def test_time_dependent_amplitude_dynamic():
     bottom = p.total(np.where(y0 < 0.25 * H, np.abs(p.stress[:, 1, 1]) * p.V0, 0.0)) / p.total(np.where(y0 < 0.25 * H, p.V0, 0.0))
     assert abs(top / -P - 1) < 0.1, f"top stress {top:.4g} vs {-P} (tolerance 10 %)"
     assert bottom < 0.05 * P, f"bottom stress {bottom:.4g} should be ~0 before the front arrives"
+
+
+def test_traction_on_nodes_without_material_warns():
+    """A traction on facets the material has left is lost: the run says so (once)."""
+    comm = MPI.COMM_WORLD
+    msh = mesh.create_rectangle(comm, [[0, 0], [1, 2]], [2, 4], mesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    mat = fm.LinearElastic(E=1e6, nu=0.0, density=1000.0)
+    pts = fm.Particles.fill(grid, mat, per_cell=2, region=lambda x: x[:, 1] < 1.0)
+    sim = fm.Simulation(grid, pts, fm.QuasiStatic(), dt=1.0)
+    sim.fix(lambda x: np.isclose(x[:, 1], 0))
+    sim.add_traction(lambda x: np.isclose(x[:, 1], 2.0), (0.0, -1e3))   # top facet: no material
+    if comm.rank == 0:
+        with pytest.warns(RuntimeWarning, match="without material"):
+            sim.run(steps=1)
+    else:
+        sim.run(steps=1)
+
+
+def test_particle_load_follows_material_and_gives_its_impulse():
+    """A free block pushed by a particle load: total momentum equals the impulse to round-off
+    (the load's nodal forces sum to value(t)), on any number of ranks."""
+    comm = MPI.COMM_WORLD
+    msh = mesh.create_rectangle(comm, [[0, 0], [4, 4]], [8, 8], mesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    mat = fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)
+    pts = fm.Particles.fill(grid, mat, per_cell=2,
+                            region=lambda x: np.all((x > 1.0) & (x < 3.0), axis=1))
+    sim = fm.Simulation(grid, pts, fm.Explicit("MUSL"), dt="auto")
+    n = sim.add_particle_load(lambda x: x[:, 1] > 2.8, lambda t: (50.0 * t, -200.0))
+    assert n == 8                                   # the top particle row of the block
+    sim.run(steps=40)
+    ts = np.arange(40) * sim.dt
+    impulse = np.array([np.sum(50.0 * ts), -200.0 * 40]) * sim.dt
+    assert np.allclose(pts.momentum(), impulse, rtol=1e-12, atol=0), (pts.momentum(), impulse)
+    with pytest.raises(ValueError, match="selects no particle"):
+        sim.add_particle_load(lambda x: x[:, 1] > 10.0, (0.0, 1.0))

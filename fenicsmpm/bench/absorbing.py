@@ -40,9 +40,8 @@ lowest particle row with the mesh extended 1 m below the material (so the materi
 down freely; no facet lies on its base). The mesh extends 1 m above the material in every
 W3 run (the free top rises by more than dx / 4 when the fixed base's reflection comes
 back) and the load acts as forces on the top particle row through the shape functions
-(_TopParticleLoad; the thesis also applies it through shape functions): fm's facet
-tractions stay on the mesh and are dropped once the loaded particles leave the top cell
-row. Runs: explicit MUSL at Courant 0.5 for dx = 0.5, 0.25, 0.125 m and implicit Newmark at
+(sim.add_particle_load; the thesis also applies it through shape functions): facet
+tractions stay on the mesh and are lost once the loaded particles leave the top cell row. Runs: explicit MUSL at Courant 0.5 for dx = 0.5, 0.25, 0.125 m and implicit Newmark at
 Courant 2 for dx = 0.25, 0.125 m; one cell wide (quick) or 1 m wide (full), to t = 0.6 s. A
 run that stops (e.g. particles leaving the mesh) is recorded with the time it stopped
 (metric failed_at, reflection null, wall_s the time until it stopped) and the error in
@@ -162,40 +161,11 @@ def w3_load(t):
     return W3_PEAK * math.exp(-((t - T0) / A) ** 2)
 
 
-class _TopParticleLoad:
-    """The W3 surface load as forces on the top particle row, f_i += sum_p N_ip f_p with
-    f_p = -p(t) * width / n_top (the load follows the material; the thesis also applies it
-    "using shape functions"). The library's tractions act on fixed mesh facets: at
-    dx = 0.125 m the top particles (dx / 4 below the surface) move out of the top cell row
-    under W3's 0.06 m displacements, the loaded nodes lose their mass and the load is
-    dropped. Wraps sim.external_force (called once per step by the integrators, on every
-    rank, after the shape functions are evaluated)."""
-
-    def __init__(self, sim, region, pressure, width):
-        p = sim.particles
-        comm = sim.comm
-        sel = p.id[np.asarray(region(p.x), dtype=bool)]
-        self.ids = np.concatenate(comm.allgather(sel)) if comm.size > 1 else sel
-        self.sim, self.pressure, self.width = sim, pressure, width
-        self._external = sim.external_force
-        sim.external_force = self.external_force
-
-    def external_force(self, t, m, gravity_scale=1.0):
-        f = self._external(t, m, gravity_scale)
-        sim = self.sim
-        fl = np.zeros_like(f)
-        sel = np.flatnonzero(np.isin(sim.particles.id, self.ids))
-        fy = -self.pressure(t) * self.width / len(self.ids)
-        np.add.at(fl[:, 1], sim.nodes[sel].ravel(), (sim.N[sel] * fy).ravel())
-        sim.grid.accumulate(fl)
-        return f + fl
-
-
 def w3_column(integrator, method, dx, width, dt, comm):
     """W3 (see the module docstring). Returns (sim, exact) like absorbing_column, with probes
     at depths 10 m (mid-height) and 20 m (the base). The mesh extends W3_ABOVE above the
     material (the free top rises when a reflection comes back) and, for the particle layer,
-    W3_BELOW below it; the load acts on the top particle row (_TopParticleLoad)."""
+    W3_BELOW below it; the load acts on the top particle row (sim.add_particle_load)."""
     import fenicsmpm as fm
     from dolfinx import mesh as dmesh
     from ..absorbing_column import A, E, NU, RHO, T0
@@ -211,7 +181,7 @@ def w3_column(integrator, method, dx, width, dt, comm):
     sim = fm.Simulation(grid, pts, integrator, dt=dt)
     tol = 1e-8 * H
     sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - width) < tol), [0])
-    _TopParticleLoad(sim, lambda x: x[:, 1] > H - 0.5 * dx, w3_load, width)
+    sim.add_particle_load(lambda x: x[:, 1] > H - 0.5 * dx, lambda t: (0.0, -w3_load(t) * width))
     base = lambda x: np.abs(x[:, 1]) < tol
     if method == "dirichlet":
         sim.fix(base)

@@ -13,6 +13,8 @@ reference area vector. Per-particle data (optional fields, they migrate with the
 Implicit tangent (normal frozen within the step), added through the CSR scatter plan:
   K_ij += sum_p N_ip N_jp a_p [(k_n + c_v c_n) n n^T + (k_s + c_v c_t)(I - n n^T)].
 """
+import warnings
+
 import numpy as np
 from numba import njit
 
@@ -55,6 +57,14 @@ class ParticleLayer:
             k_n, k_s = law.k_n, law.k_s
         sel = np.asarray(self.region(p.x), dtype=bool)
         an0 = p.add_field("layer_an0", (d,))
+        taken = sel & np.any(an0 != 0.0, axis=1)
+        n_taken = int(np.count_nonzero(taken))
+        if p.grid.comm.size > 1:
+            n_taken = p.grid.comm.allreduce(n_taken)
+        if n_taken and p.grid.comm.rank == 0:
+            warnings.warn(f"ParticleLayer: {n_taken} particle(s) already belong to another layer; "
+                          f"a particle carries one layer, the one added last", RuntimeWarning,
+                          stacklevel=3)
         coef = p.add_field("layer_coef", (4,))
         u0 = p.add_field("layer_u0", (d,))
         t = p.V[sel] ** (1.0 / d) if self.thickness is None else self.thickness

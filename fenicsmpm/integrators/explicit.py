@@ -63,7 +63,7 @@ class Explicit:
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
-        f += sim.external_force(sim.t, m)
+        f += sim.external_force(sim.t, m, active=active)
         if sim.robin is not None or sim.layers:    # Robin tractions from the start-of-step state
             fr = np.zeros_like(f)
             if sim.robin is not None:

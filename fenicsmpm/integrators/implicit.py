@@ -161,9 +161,9 @@ class Newmark(_Newton):
         m, mv = sim.nodal_mass_momentum()
         ma = sim.nodal_weighted(p.a)
         grid.accumulate(m, mv, ma)
-        f_ext = sim.external_force(sim.t + dt, m)
         sim.timers["p2g"] += time.perf_counter() - t0
         active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
+        f_ext = sim.external_force(sim.t + dt, m, active=active)
         v0 = np.zeros_like(mv)
         a0 = np.zeros_like(ma)
         v0[active] = mv[active] / m[active, None]
@@ -214,8 +214,9 @@ class QuasiStatic(_Newton):
         m = sim.nodal_mass()
         grid.accumulate(m)
         scale = min(1.0, (sim.step_count + 1) / self.load_steps)
-        f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale)
-        sim.nodal = dict(mass=m, active=sim.active_mask(m))
+        active = sim.active_mask(m)
+        f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale, active=active)
+        sim.nodal = dict(mass=m, active=active)
         du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt,
                              np.zeros((grid.n_nodes, sim.gdim)))
         zero = np.zeros_like(du)
