@@ -6,7 +6,6 @@ refuses)."""
 import json
 import os
 import shutil
-import tempfile
 
 import pytest
 from mpi4py import MPI
@@ -21,14 +20,8 @@ V2_CELLS = (5, 10)
 
 
 @pytest.fixture(scope="module")
-def shared_dir():
-    """One temporary directory shared by all ranks (made on rank 0, broadcast)."""
-    path = tempfile.mkdtemp(prefix="fenicsmpm_bench_cases_") if comm.rank == 0 else None
-    path = comm.bcast(path, root=0)
-    yield path
-    comm.barrier()
-    if comm.rank == 0:
-        shutil.rmtree(path, ignore_errors=True)
+def shared_dir(shared_module_tmp_path):
+    return shared_module_tmp_path
 
 
 def _load(path):

@@ -18,6 +18,7 @@ import warnings
 import numpy as np
 from numba import njit
 
+from ..kernels.transfer import add_block
 from ..materials.piola import inv3
 from .robin import Viscoelastic, Viscous
 
@@ -130,6 +131,7 @@ def layer_tangent(D, layer, nodes, N, F, an0, coef, c_v, plan, nodeptr, constrai
     """data += sum_p N_ip N_jp a_p [(k_n + c_v c_n) n n + (k_s + c_v c_t)(I - n n)]."""
     d = len(D)
     n = np.empty(d)
+    block = np.empty((d, d))
     for q in range(layer.shape[0]):
         p = layer[q]
         a = _current_area_normal(F[p], an0[p], d, n)
@@ -139,18 +141,10 @@ def layer_tangent(D, layer, nodes, N, F, an0, coef, c_v, plan, nodeptr, constrai
             i = nodes[p, i_]
             deg = nodeptr[i + 1] - nodeptr[i]
             for j_ in range(nodes.shape[1]):
-                j = nodes[p, j_]
                 w = N[p, i_] * N[p, j_] * a
                 if w == 0.0:
                     continue
-                base = plan[p, i_, j_]
                 for r in range(d):
-                    if constrained[i * d + r]:
-                        continue
                     for c in range(d):
-                        if constrained[j * d + c]:
-                            continue
-                        val = (cn - ct) * n[r] * n[c]
-                        if r == c:
-                            val += ct
-                        data[base + r * deg * d + c] += w * val
+                        block[r, c] = w * ((cn - ct) * n[r] * n[c] + (ct if r == c else 0.0))
+                add_block(data, plan[p, i_, j_], deg, i, nodes[p, j_], d, constrained, block)

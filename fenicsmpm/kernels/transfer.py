@@ -234,25 +234,33 @@ def diagonal_slots(nodeptr, adj, bs):
 
 
 @njit(cache=True)
+def add_block(data, base, deg, i, j, d, constrained, block):
+    """Add the d x d block for node pair (i, j) at CSR offset `base` (see stiffness_plan),
+    skipping constrained rows and columns."""
+    for r in range(d):
+        if constrained[i * d + r]:
+            continue
+        for c in range(d):
+            if not constrained[j * d + c]:
+                data[base + r * deg * d + c] += block[r, c]
+
+
+@njit(cache=True)
 def assemble_stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, data):
     """data += sum_p V_p grad N_ia,J A_p[r, J, c, L] grad N_jb,L (particle quadrature of the
     updated-Lagrangian tangent), skipping constrained rows and columns."""
     d = len(D)
+    block = np.empty((d, d))
     for p in range(nodes.shape[0]):
         for a in range(nodes.shape[1]):
             i = nodes[p, a]
             deg = nodeptr[i + 1] - nodeptr[i]
             for b in range(nodes.shape[1]):
-                j = nodes[p, b]
-                base = plan[p, a, b]
                 for r in range(d):
-                    if constrained[i * d + r]:
-                        continue
                     for c in range(d):
-                        if constrained[j * d + c]:
-                            continue
                         s = 0.0
                         for J in range(d):
                             for L in range(d):
                                 s += dN[p, a, J] * A[p, r, J, c, L] * dN[p, b, L]
-                        data[base + r * deg * d + c] += V[p] * s
+                        block[r, c] = V[p] * s
+                add_block(data, plan[p, a, b], deg, i, nodes[p, b], d, constrained, block)
