@@ -156,6 +156,8 @@ class Simulation:
         if reset_displacement:
             p.u[:] = 0.0
             self.robin_u[:] = 0.0
+            if hasattr(p, "layer_u0"):
+                p.layer_u0[:] = 0.0
         p.a[:] = 0.0
         self.stage_start = self.t
 
