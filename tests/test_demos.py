@@ -8,7 +8,6 @@ import os
 import re
 from pathlib import Path
 
-import pytest
 from mpi4py import MPI
 
 from demo_helpers import exist_on_rank0, load_demo
@@ -17,13 +16,8 @@ ROOT = Path(__file__).resolve().parents[1]
 comm = MPI.COMM_WORLD
 
 
-@pytest.fixture(scope="module")
-def demo_dir(shared_module_tmp_path):
-    return shared_module_tmp_path
-
-
-def test_vibrating_bar_demo(demo_dir):
-    out = os.path.join(demo_dir, "bar")
+def test_vibrating_bar_demo(shared_module_tmp_path):
+    out = os.path.join(shared_module_tmp_path, "bar")
     m = load_demo("vibrating_bar").main(["--quick", "--out", out])
     assert exist_on_rank0(m["png"], m["explicit"]["probe_csv"], m["implicit"]["probe_csv"],
                           os.path.join(out, "explicit", "particles.pvd"),
@@ -33,8 +27,8 @@ def test_vibrating_bar_demo(demo_dir):
     assert m["implicit"]["dt"] > 4.99 * m["explicit"]["dt"] / 0.2      # 5x the critical step
 
 
-def test_self_weight_column_demo(demo_dir):
-    out = os.path.join(demo_dir, "column")
+def test_self_weight_column_demo(shared_module_tmp_path):
+    out = os.path.join(shared_module_tmp_path, "column")
     m = load_demo("self_weight_column").main(["--quick", "--out", out])
     assert exist_on_rank0(m["png"], m["probe_csv"], os.path.join(out, "output", "particles.pvd"))
     assert m["stress_error"] < 0.02, m
@@ -48,10 +42,10 @@ def readme_example():
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
-def test_readme_example(demo_dir, monkeypatch, capsys):
-    monkeypatch.chdir(demo_dir)                 # the example writes to results/example/
+def test_readme_example(shared_module_tmp_path, monkeypatch, capsys):
+    monkeypatch.chdir(shared_module_tmp_path)                 # the example writes to results/example/
     exec(compile(readme_example(), "README.md", "exec"), {"__name__": "__readme__"})
-    assert exist_on_rank0(os.path.join(demo_dir, "results", "example", "probe.csv"),
-                          os.path.join(demo_dir, "results", "example", "particles.pvd"))
+    assert exist_on_rank0(os.path.join(shared_module_tmp_path, "results", "example", "probe.csv"),
+                          os.path.join(shared_module_tmp_path, "results", "example", "particles.pvd"))
     if comm.rank == 0:
         assert "sigma_yy under the load" in capsys.readouterr().out

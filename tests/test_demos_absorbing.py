@@ -21,13 +21,8 @@ from fenicsmpm.bench import absorbing
 comm = MPI.COMM_WORLD
 
 
-@pytest.fixture(scope="module")
-def out_dir(shared_module_tmp_path):
-    return shared_module_tmp_path
-
-
-def test_column_pulse_demo(out_dir):
-    out = os.path.join(out_dir, "column_pulse")
+def test_column_pulse_demo(shared_module_tmp_path):
+    out = os.path.join(shared_module_tmp_path, "column_pulse")
     m = load_demo("column_pulse").main(["--quick", "--out", out])
     assert exist_on_rank0(m["png"], *m["csv"].values()), f"missing output in {out}"
     r = m["reflection"]
@@ -37,8 +32,8 @@ def test_column_pulse_demo(out_dir):
     assert abs(m["offset_error"]) < 0.05, m["viscous"]
 
 
-def test_robin_playground_demo(out_dir):
-    out = os.path.join(out_dir, "playground")
+def test_robin_playground_demo(shared_module_tmp_path):
+    out = os.path.join(shared_module_tmp_path, "playground")
     m = load_demo("robin_playground").main(["--quick", "--out", out])
     assert exist_on_rank0(m["png"]), f"missing {m['png']}"
     r = m["reflection"]
@@ -50,8 +45,8 @@ def test_robin_playground_demo(out_dir):
         assert m["over_fixed"][name] == pytest.approx(1.0 / 3.0, abs=0.03), m["over_fixed"]
 
 
-def test_point_load_2d_demo(out_dir):
-    out = os.path.join(out_dir, "point_load_2d")
+def test_point_load_2d_demo(shared_module_tmp_path):
+    out = os.path.join(shared_module_tmp_path, "point_load_2d")
     m = load_demo("point_load_2d").main(["--quick", "--out", out])
     assert exist_on_rank0(m["png"], m["csv"]), f"missing output in {out}"
     for b in ("viscous", "viscoelastic"):
@@ -65,8 +60,8 @@ def test_point_load_2d_demo(out_dir):
     assert m["fixed"]["loaded_particles"] == 2
 
 
-def test_absorbing_bench_tiny(out_dir):
-    out = os.path.join(out_dir, "bench")
+def test_absorbing_bench_tiny(shared_module_tmp_path):
+    out = os.path.join(shared_module_tmp_path, "bench")
     doc = absorbing.run(out=out, tiny=True, verbose=False)
     path = os.path.join(out, "absorbing.json")
     assert exist_on_rank0(path, os.path.join(out, "absorbing.png"))

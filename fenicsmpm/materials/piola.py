@@ -48,6 +48,17 @@ def inv3(A, Ainv):
 
 
 @numba.njit(cache=True)
+def _sigma_FinvT(sigma_p, Finv, out):
+    """out_iJ = sigma_ij (dF^-1)_Jj  (sigma dF^-T) for one particle."""
+    for i in range(3):
+        for a in range(3):
+            s = 0.0
+            for j in range(3):
+                s += sigma_p[i, j] * Finv[a, j]
+            out[i, a] = s
+
+
+@numba.njit(cache=True)
 def first_piola(idx, dF, sigma, P):
     """First Piola-Kirchhoff stress relative to the start-of-step configuration.
 
@@ -56,15 +67,14 @@ def first_piola(idx, dF, sigma, P):
     Writes P[idx], shape (n, 3, 3).
     """
     Finv = np.empty((3, 3))
+    sFt = np.empty((3, 3))
     for q in range(idx.shape[0]):
         p = idx[q]
         J = inv3(dF[p], Finv)
+        _sigma_FinvT(sigma[p], Finv, sFt)
         for i in range(3):
             for a in range(3):
-                s = 0.0
-                for j in range(3):
-                    s += sigma[p, i, j] * Finv[a, j]
-                P[p, i, a] = J * s
+                P[p, i, a] = J * sFt[i, a]
 
 
 @numba.njit(cache=True)
@@ -83,13 +93,7 @@ def first_piola_tangent(idx, dF, sigma, dsig, A):
     for q in range(idx.shape[0]):
         p = idx[q]
         J = inv3(dF[p], Finv)
-        # sFt_iJ = sigma_ij Finv_Jj   (sigma dF^{-T})
-        for i in range(3):
-            for a in range(3):
-                s = 0.0
-                for j in range(3):
-                    s += sigma[p, i, j] * Finv[a, j]
-                sFt[i, a] = s
+        _sigma_FinvT(sigma[p], Finv, sFt)
         for i in range(3):
             for a in range(3):
                 for k in range(3):
