@@ -67,12 +67,15 @@ def self_weight_column(integrator, n_cells=10, per_cell=2, height=10.0, E=1e8, n
 
 
 def colliding_discs(integrator, n_cells=20, per_cell=2, cfl=0.5, speed=0.1,
-                    cell_type=dmesh.CellType.quadrilateral, comm=MPI.COMM_WORLD):
+                    cell_type=dmesh.CellType.quadrilateral, comm=MPI.COMM_WORLD, partitioner=None):
     """L2: two elastic discs (radius 0.2, centres (0.2, 0.2) and (0.8, 0.8)) moving towards each
     other with velocities +-(speed, speed) in a unit square; E = 1000, nu = 0.3, rho = 1000
     (Sulsky et al. 1995). No boundary conditions, no gravity: total momentum stays zero, and
-    kinetic energy turns into strain energy during the impact (which starts at t ~ 1.59 s)."""
-    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells], cell_type)
+    kinetic energy turns into strain energy during the impact (which starts at t ~ 1.59 s).
+    `partitioner` (a dolfinx cell partitioner) fixes where the mesh is cut across ranks."""
+    extra = {} if partitioner is None else {"partitioner": partitioner}
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells], cell_type,
+                                 **extra)
     grid = Grid(msh)
     mat = LinearElastic(E=1000.0, nu=0.3, density=1000.0)
     centres = np.array([[0.2, 0.2], [0.8, 0.8]])
