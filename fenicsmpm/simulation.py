@@ -43,7 +43,6 @@ class Simulation:
         if not (0 < cfl <= 1):
             raise ValueError(f"Simulation: 'cfl' must be in (0, 1], got {cfl!r}")
         self.cfl = cfl
-        self.dt_critical = grid.h / max(m.p_wave_speed for m in particles.materials)
         self.dt = self._check_dt(dt)
         self.mass_tolerance = mass_tolerance
         self.t = 0.0
@@ -70,6 +69,14 @@ class Simulation:
         self._all = np.zeros(0, dtype=np.int64)
         integrator.setup(self)
 
+    @property
+    def dt_critical(self):
+        """Explicit stability limit: stability_factor * h / max c_p, where an integrator's
+        `stability_factor` (default 1, symplectic Euler / central difference) scales the
+        central-difference limit, e.g. Omega_s(rho_b) / 2 for explicit generalized-alpha."""
+        c = max(m.p_wave_speed for m in self.particles.materials)
+        return getattr(self.integrator, "stability_factor", 1.0) * self.grid.h / c
+
     def _check_dt(self, dt):
         if isinstance(dt, str):
             if dt != "auto":
@@ -81,7 +88,8 @@ class Simulation:
             raise ValueError(f"Simulation: 'dt' must be > 0, got {dt!r}")
         if self.integrator.explicit and dt > self.dt_critical:
             raise ValueError(f"Simulation: dt = {dt:.4g} exceeds the explicit critical time step "
-                             f"h / c_p = {self.dt_critical:.4g} s")
+                             f"{self.dt_critical:.4g} s (h = {self.grid.h:.4g}, stability factor "
+                             f"{getattr(self.integrator, 'stability_factor', 1.0):.4g} x h / c_p)")
         return float(dt)
 
     # ------------------------------------------------------------------ set-up API
@@ -241,6 +249,7 @@ class Simulation:
             self.dN = np.empty((n, nv, self.gdim))
             self._dF = np.empty((n, 3, 3))
             self._sigma_new = np.empty((n, 3, 3))
+            self._state_new = np.empty_like(p.state)
             self._n_alloc = n
         ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad, g.affine_Jinv,
                      self.nodes, self.N, self.dN)
@@ -332,19 +341,31 @@ class Simulation:
         return [(m, np.flatnonzero(p.material_id == k)) for k, m in enumerate(p.materials)]
 
     def trial_stress(self, dF):
-        """Stress for the incremental deformation dF (not committed), in self._sigma_new."""
+        """Stress for the incremental deformation dF (not committed), in self._sigma_new.
+
+        History variables: `state` handed to a material holds the committed values on entry and
+        the material overwrites them with its trial values (self._state_new), so a Newton
+        iteration always starts from the committed state; `commit` accepts them."""
         p = self.particles
         t0 = time.perf_counter()
+        state = p.state
+        if p.state.shape[1]:
+            if self._state_new.shape != p.state.shape:
+                self._state_new = np.empty_like(p.state)
+            state = self._state_new
+            state[:] = p.state
         for mat, idx in self.material_groups():
-            mat.stress(idx, dF, p.F, p.stress, self._sigma_new, p.state)
+            mat.stress(idx, dF, p.F, p.stress, self._sigma_new, state)
         self.timers["constitutive"] += time.perf_counter() - t0
         return self._sigma_new
 
     def commit(self, dF):
-        """Accept dF and the trial stress: update F, V, stress and the stress work."""
+        """Accept dF, the trial stress and history: update F, V, stress, state and stress work."""
         p = self.particles
         t0 = time.perf_counter()
         kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work)
+        if p.state.shape[1]:
+            p.state[:] = self._state_new
         self.timers["constitutive"] += time.perf_counter() - t0
 
     def energy(self):

@@ -2,6 +2,16 @@
 
 Conventions: 3x3 tensors (plane strain in 2D), Cauchy stress, tension
 positive; kernels act only on the particle rows listed in ``idx``.
+
+Interface of a material (see LinearElastic):
+    n_state                      number of history variables per particle (p.state columns)
+    stress(idx, dF, F_old, sigma_old, sigma_new, state)
+                                 trial stress for the increment dF; `state` holds the committed
+                                 history on entry and receives the trial history (the
+                                 Simulation commits it only when the step is accepted)
+    tangent(idx, dF, F_old, sigma_old, sigma_new, state, dsig)
+                                 dsig = d sigma_new / d dF, with `state` the committed history
+    density, p_wave_speed        for masses and the critical time step
 """
 from .linear_elastic import LinearElastic
 from .neo_hookean import NeoHookean
