@@ -7,6 +7,10 @@ from numba import njit
 
 from .materials.piola import det3
 
+class ParticlesLeftMesh(RuntimeError):
+    """Particles left the mesh (raised before the step changed any state)."""
+
+
 FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
 
 

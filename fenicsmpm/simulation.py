@@ -11,11 +11,12 @@ import numpy as np
 from .boundaries import ParticleLayer, Robin, RobinForms, Traction, TractionForms, fixed_dofs
 from .boundaries import particle_layer as kl
 from .boundaries.robin import facets_on_boundary
-from .guards import check_particles
+from .guards import ParticlesLeftMesh, check_particles
 from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
 
+LEAVE_POLICIES = ("error", "remove")
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
                 "acceleration": "a"}
 
@@ -26,10 +27,15 @@ class Simulation:
     dt: time step (> 0), or "auto" for explicit integrators (cfl * h / max c_p).
     gravity: body acceleration vector (length gdim), default zero.
     mass_tolerance: nodes with mass below this fraction of the largest nodal mass are
-    inactive (no velocity, no division by a vanishing mass; constrained in implicit solves)."""
+    inactive (no velocity, no division by a vanishing mass; constrained in implicit solves).
+    on_leave: what happens to particles that leave the mesh: "error" (stop with their ids and
+    positions) or "remove" (drop them; the removed mass is counted in `removed_mass`, and
+    reported as a warning).
+    max_dt_cuts: implicit runs only: when Newton or the KSP fails, retry the step as two
+    half steps, at most this many halvings deep (each retry is logged as a warning)."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-9):
+                 mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0):
         self.grid = grid
         self.particles = particles
         self.integrator = integrator
@@ -65,6 +71,13 @@ class Simulation:
         self.stats = {}
         self.timers = dict(locate=0.0, shape=0.0, p2g=0.0, solve=0.0, g2p=0.0, constitutive=0.0,
                            guards=0.0, assembly=0.0, ksp=0.0)
+        if on_leave not in LEAVE_POLICIES:
+            raise ValueError(f"Simulation: 'on_leave' must be one of {LEAVE_POLICIES}, got {on_leave!r}")
+        if not (isinstance(max_dt_cuts, (int, np.integer)) and 0 <= max_dt_cuts <= 20):
+            raise ValueError(f"Simulation: 'max_dt_cuts' must be an integer in [0, 20], got {max_dt_cuts!r}")
+        self.on_leave, self.max_dt_cuts = on_leave, int(max_dt_cuts)
+        self.removed_mass = 0.0
+        self.removed_count = 0
         self._n_alloc = -1
         self._all = np.zeros(0, dtype=np.int64)
         integrator.setup(self)
@@ -229,6 +242,28 @@ class Simulation:
         return pr
 
     # ------------------------------------------------------------------ stages
+    def _particles_left(self, ids, xs):
+        """Apply the `on_leave` policy to particles in no cell of the mesh (cell == -1; `ids`
+        and `xs` list them globally, the same on every rank)."""
+        where = (f"step {self.step_count}, t = {self.t:.6g}: {len(ids)} particle(s) left the mesh, "
+                 f"ids {ids[:5].tolist()} at {np.round(xs[:5], 6).tolist()}")
+        if self.on_leave == "error":
+            raise ParticlesLeftMesh(where)
+        p = self.particles
+        gone = p.cell < 0
+        mass = p.mass[gone].sum()
+        if self.comm.size > 1:
+            mass = self.comm.allreduce(mass)
+        keep = np.flatnonzero(~gone)
+        for name in p.field_names():
+            setattr(p, name, np.ascontiguousarray(getattr(p, name)[keep]))
+        p.version += 1
+        self.removed_mass += mass
+        self.removed_count += len(ids)
+        if self.comm.rank == 0:
+            warnings.warn(f"{where}: removed (mass {mass:.6g}; {self.removed_count} particles, "
+                          f"mass {self.removed_mass:.6g} removed so far)", stacklevel=3)
+
     def locate_and_shape(self):
         """Locate particles (only the ones that left their cell are searched on unstructured
         meshes) and evaluate the shape functions at their positions."""
@@ -237,9 +272,7 @@ class Simulation:
         p.cell, p.xi = g.locate(p.x, p.cell)
         ids, xs = p.send_to_owners()
         if len(ids):
-            raise RuntimeError(f"step {self.step_count}, t = {self.t:.6g}: {len(ids)} particle(s) "
-                               f"left the mesh, ids {ids[:5].tolist()} at "
-                               f"{np.round(xs[:5], 6).tolist()}")
+            self._particles_left(ids, xs)
         cells, xi = p.cell, p.xi
         t1 = time.perf_counter()
         n, nv = len(p), g.cell_nodes.shape[1]
@@ -374,10 +407,33 @@ class Simulation:
         return dict(kinetic=p.kinetic_energy(), strain=p.strain_energy())
 
     # ------------------------------------------------------------------ time loop
+    def _save_last_state(self, output, checkpoint):
+        """Write the last accepted state after a failed step (collective: every rank raises)."""
+        if output is not None and self.step_count % output.every != 0:
+            output.write(self)
+        if checkpoint is not None:
+            self.checkpoint(checkpoint)
+
+    def _advance(self, dt, cuts_left):
+        """integrator.step over dt; on a Newton/KSP failure of an implicit integrator (raised
+        before any state changed) retry as two steps of dt/2, at most `cuts_left` deep."""
+        try:
+            self.integrator.step(self, dt)
+        except (RuntimeError, FloatingPointError) as err:
+            # implicit integrators change particles only after convergence
+            err.state_intact = isinstance(err, ParticlesLeftMesh) or not self.integrator.explicit
+            if self.integrator.explicit or cuts_left == 0 or isinstance(err, ParticlesLeftMesh):
+                raise
+            if self.comm.rank == 0:
+                warnings.warn(f"{err}; retrying with two steps of dt = {dt / 2:.6g}", stacklevel=3)
+            self._advance(dt / 2, cuts_left - 1)
+            self._advance(dt / 2, cuts_left - 1)
+            return
+        self.t += dt
+
     def step(self):
-        """Advance one time step."""
-        self.integrator.step(self, self.dt)
-        self.t += self.dt
+        """Advance one time step (see `max_dt_cuts` for implicit retries)."""
+        self._advance(self.dt, self.max_dt_cuts)
         self.step_count += 1
         t0 = time.perf_counter()
         check_particles(self)
@@ -388,10 +444,38 @@ class Simulation:
             if self.step_count % every == 0:
                 callback(self)
 
-    def run(self, t_end=None, steps=None, output=None, progress=None):
+    def checkpoint(self, path, keep=1):
+        """Save the complete state under directory `path` (collective; see fenicsmpm.checkpoint):
+        particles with history variables, integrator and boundary state, stage, time, step and
+        probe records. Written atomically; the `keep` newest checkpoints are kept."""
+        from . import checkpoint
+        return checkpoint.write(self, str(path), keep)
+
+    def restore(self, path):
+        """Load the newest checkpoint under `path` into this simulation, which must be set up
+        as the checkpointed one (mesh, materials, integrator, stage, boundaries, probes)."""
+        from . import checkpoint
+        return checkpoint.read(self, str(path))
+
+    @classmethod
+    def restart(cls, path, build):
+        """`build()` sets a simulation up as for the original run; it is restored from the
+        newest checkpoint under `path` and returned, ready to `run` on."""
+        sim = build()
+        if not isinstance(sim, cls):
+            raise TypeError(f"restart: 'build' must return a Simulation, got {type(sim).__name__}")
+        return sim.restore(path)
+
+    def run(self, t_end=None, steps=None, output=None, progress=None, checkpoint=None,
+            checkpoint_every=None):
         """Run until t_end or for a number of steps; write `output` (an Output) as configured.
 
-        progress: None (a line on a TTY for runs longer than a few seconds), True or False."""
+        progress: None (a line on a TTY for runs longer than a few seconds), True or False.
+        checkpoint, checkpoint_every: write a checkpoint to directory `checkpoint` every that
+        many steps (and at the end of the run).
+        When a step fails before changing the state (a Newton/KSP failure after the allowed
+        dt cuts, particles leaving the mesh), the last accepted state is written to `output`
+        and `checkpoint` before the error propagates."""
         if (t_end is None) == (steps is None):
             raise ValueError("run: give exactly one of 't_end' or 'steps'")
         if steps is None:
@@ -400,6 +484,11 @@ class Simulation:
             steps = int(math.ceil((t_end - self.t) / self.dt - 1e-9))
         elif not (isinstance(steps, (int, np.integer)) and steps >= 0):
             raise ValueError(f"run: 'steps' must be a non-negative integer, got {steps!r}")
+        if (checkpoint is None) != (checkpoint_every is None):
+            raise ValueError("run: give both 'checkpoint' (a directory) and 'checkpoint_every'")
+        if checkpoint_every is not None and not (
+                isinstance(checkpoint_every, (int, np.integer)) and checkpoint_every >= 1):
+            raise ValueError(f"run: 'checkpoint_every' must be a positive integer, got {checkpoint_every!r}")
         t_final = self.t + steps * self.dt
         bar = Progress(steps, t_final, self.comm, force=progress)
         if output is not None:
@@ -408,10 +497,17 @@ class Simulation:
                 output.write(self)
         try:
             for k in range(steps):
-                self.step()
+                try:
+                    self.step()
+                except (RuntimeError, FloatingPointError) as err:
+                    if getattr(err, "state_intact", False):
+                        self._save_last_state(output, checkpoint)
+                    raise
                 bar.update(k + 1, self.t)
                 if output is not None and self.step_count % output.every == 0:
                     output.write(self)
+                if checkpoint is not None and (self.step_count % checkpoint_every == 0 or k == steps - 1):
+                    self.checkpoint(checkpoint)
         finally:
             bar.close()
             if output is not None:

@@ -1,0 +1,178 @@
+"""Checkpoint and restart: the complete state of a Simulation, written so that a run killed at
+any moment leaves the previous checkpoint intact.
+
+Layout of a checkpoint directory `path`:
+    path/LATEST                    name of the newest complete checkpoint (replaced atomically)
+    path/step_00001200/meta.json   time, step, stage, integrator, sizes (rank 0)
+    path/step_00001200/rank0.npz   this rank's particles (every migrating field, history
+                                   variables included), its nodal state (Robin spring
+                                   displacements, integrator arrays such as a^n) keyed by global
+                                   node index, and its probe records
+Every file is written under a temporary name and renamed; LATEST is switched by rank 0 only
+after all ranks have renamed their files, and older checkpoints are removed after that.
+
+Restart on the same number of ranks reads each rank's own file back in the same particle
+order, so an explicit run continues bit for bit. On another number of ranks, rank r reads the
+particle files k with k % size == r and hands particles to the ranks owning their cells;
+nodal arrays are matched by global node index."""
+import json
+import os
+import shutil
+
+import numpy as np
+
+FORMAT = 1
+
+
+def _integrator_arrays(integrator):
+    """Nodal arrays (n_nodes, ...) an integrator keeps between steps (`checkpoint_arrays`)."""
+    get = getattr(integrator, "checkpoint_arrays", None)
+    return dict(get()) if get is not None else {}
+
+
+def _node_gids(grid):
+    imap = grid.V.dofmap.index_map
+    return imap.local_to_global(np.arange(grid.n_nodes, dtype=np.int32)).astype(np.int64)
+
+
+def _write_atomic(fname, write):
+    tmp = fname + ".tmp"
+    with open(tmp, "wb") as f:
+        write(f)
+        f.flush()
+        os.fsync(f.fileno())
+    os.replace(tmp, fname)
+
+
+def write(sim, path, keep=1):
+    """Write a checkpoint of `sim` under directory `path` (collective); returns its folder."""
+    comm, p, grid = sim.comm, sim.particles, sim.grid
+    name = f"step_{sim.step_count:08d}"
+    folder = os.path.join(path, name)
+    if comm.rank == 0:
+        os.makedirs(folder, exist_ok=True)
+    if comm.size > 1:
+        comm.barrier()
+    arrays = {f"p.{f}": getattr(p, f) for f in p.field_names()}
+    arrays["node_gid"] = _node_gids(grid)
+    arrays["node.robin_u"] = sim.robin_u
+    for k, a in _integrator_arrays(sim.integrator).items():
+        arrays[f"node.integrator.{k}"] = a
+    for k, pr in enumerate(sim.probes):
+        arrays[f"probe.{k}"] = np.array(pr.rows, dtype=np.float64).reshape(-1, len(pr.columns))
+    _write_atomic(os.path.join(folder, f"rank{comm.rank}.npz"), lambda f: np.savez(f, **arrays))
+    meta = dict(format=FORMAT, t=sim.t, step_count=sim.step_count, dt=sim.dt,
+                stage_start=sim.stage_start, initial_stress=sim.initial_stress,
+                gravity=sim.gravity.tolist(), integrator=type(sim.integrator).__name__,
+                ranks=comm.size, gdim=sim.gdim, n_particles=p.n_global,
+                n_nodes=grid.V.dofmap.index_map.size_global,
+                materials=[type(m).__name__ for m in p.materials],
+                optional=list(p.optional), n_probes=len(sim.probes))
+    if comm.size > 1:
+        comm.barrier()                         # every rank file is complete
+    if comm.rank == 0:
+        _write_atomic(os.path.join(folder, "meta.json"),
+                      lambda f: f.write(json.dumps(meta, indent=1).encode()))
+        _write_atomic(os.path.join(path, "LATEST"), lambda f: f.write(name.encode()))
+        old = sorted(d for d in os.listdir(path) if d.startswith("step_") and d != name)
+        for d in old[: max(0, len(old) - (keep - 1))]:
+            shutil.rmtree(os.path.join(path, d), ignore_errors=True)
+    if comm.size > 1:
+        comm.barrier()
+    return folder
+
+
+def _latest(path, comm):
+    name = None
+    if comm.rank == 0:
+        try:
+            with open(os.path.join(path, "LATEST")) as f:
+                name = f.read().strip()
+        except OSError:
+            name = None
+    if comm.size > 1:
+        name = comm.bcast(name, root=0)
+    if name is None:
+        raise FileNotFoundError(f"restore: no checkpoint in {path!r} (missing {path}/LATEST)")
+    folder = os.path.join(path, name)
+    with open(os.path.join(folder, "meta.json")) as f:
+        return folder, json.load(f)
+
+
+def _check(sim, meta):
+    p = sim.particles
+    have = dict(integrator=type(sim.integrator).__name__, gdim=sim.gdim,
+                n_nodes=sim.grid.V.dofmap.index_map.size_global,
+                materials=[type(m).__name__ for m in p.materials], n_probes=len(sim.probes))
+    bad = {k: (meta[k], v) for k, v in have.items() if meta[k] != v}
+    if meta.get("format") != FORMAT:
+        bad["format"] = (meta.get("format"), FORMAT)
+    if bad:
+        detail = ", ".join(f"{k}: checkpoint {a!r}, simulation {b!r}" for k, (a, b) in bad.items())
+        raise ValueError(f"restore: the simulation is not set up like the checkpointed one ({detail}); "
+                         f"build it as for the original run (same mesh, materials in the same "
+                         f"order, same integrator and stage, same probes) before restoring")
+
+
+def read(sim, path):
+    """Restore `sim` from the newest checkpoint under `path` (collective)."""
+    from .particles import FIELDS
+    comm, p, grid = sim.comm, sim.particles, sim.grid
+    folder, meta = _latest(path, comm)
+    _check(sim, meta)
+    same = meta["ranks"] == comm.size
+    mine = [comm.rank] if same else list(range(comm.rank, meta["ranks"], comm.size))
+    files = [np.load(os.path.join(folder, f"rank{r}.npz")) for r in mine]
+    for name in meta["optional"]:
+        a = files[0][f"p.{name}"] if files else None
+        if not hasattr(p, name):
+            p.add_field(name, () if a is None else a.shape[1:], np.float64 if a is None else a.dtype)
+    for name in p.field_names():
+        key = f"p.{name}"
+        parts = [f[key] for f in files if key in f.files]
+        if parts:
+            arr = np.ascontiguousarray(np.concatenate(parts))
+        else:                                  # no particles read on this rank
+            arr = np.zeros((0,) + getattr(p, name).shape[1:], dtype=getattr(p, name).dtype)
+        setattr(p, name, arr)
+    p.version += 1
+    if not same:
+        p.cell, p.xi = grid.locate(p.x)
+        out_ids, _ = p.send_to_owners()
+        if len(out_ids):
+            raise RuntimeError(f"restore: particles {out_ids[:5].tolist()} lie outside the mesh")
+        p.version += 1
+    # nodal state, matched by global node index (all files when the rank count changed)
+    gid = _node_gids(grid)
+    order = np.argsort(gid)
+    targets = {"node.robin_u": sim.robin_u}
+    targets.update({f"node.integrator.{k}": a for k, a in _integrator_arrays(sim.integrator).items()})
+    sources = files if same else [np.load(os.path.join(folder, f"rank{r}.npz"))
+                                  for r in range(meta["ranks"])]
+    for f in sources:
+        g = f["node_gid"]
+        pos = np.searchsorted(gid[order], g)
+        ok = (pos < len(gid)) & (gid[order][np.minimum(pos, len(gid) - 1)] == g)
+        local = order[pos[ok]]
+        for key, target in targets.items():
+            if key in f.files:
+                target[local] = f[key][ok]
+    # probes: records so far (kept by the rank that recorded them; rewritten by serial writers)
+    for k, pr in enumerate(sim.probes):
+        rows = [r for f in files for r in f[f"probe.{k}"].tolist()]
+        pr.rows = sorted(rows)
+        pr._version = -1
+        if pr.writer is not None:
+            pr.writer.close()
+            pr.writer = type(pr.writer)(pr.path, pr.columns, comm)
+            for r in pr.rows:
+                pr.writer.write_row(r)
+    sim.t, sim.step_count, sim.dt = meta["t"], meta["step_count"], meta["dt"]
+    sim.stage_start, sim.initial_stress = meta["stage_start"], meta["initial_stress"]
+    sim.gravity = np.asarray(meta["gravity"], dtype=np.float64)
+    restore = getattr(sim.integrator, "restore_arrays", None)
+    if restore is not None:
+        restore(sim)
+    sim._n_alloc = -1                          # per-particle work arrays are re-sized
+    assert set(FIELDS) <= set(p.field_names())
+    return sim
