@@ -17,6 +17,7 @@ from .kernels import shape as ks
 from .kernels import transfer as kt
 
 LEAVE_POLICIES = ("error", "remove")
+SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2")
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
                 "acceleration": "a"}
 
@@ -32,12 +33,20 @@ class Simulation:
     positions) or "remove" (drop them; the removed mass is counted in `removed_mass`, and
     reported as a warning).
     max_dt_cuts: implicit runs only: when Newton or the KSP fails, retry the step as two
-    half steps, at most this many halvings deep (each retry is logged as a warning)."""
+    half steps, at most this many halvings deep (each retry is logged as a warning).
+    shape: the shape-function family, one of SHAPES: "mpm" (the Lagrange basis of the
+    particle's cell), "ugimp"/"cpgimp" (kernels.gimp: structured quadrilateral/hexahedral
+    grids), "cpdi1"/"cpdi2" (kernels.cpdi: any 2D P1/Q1 mesh). The wider families need, in
+    parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(), and an explicit
+    integrator (the implicit sparsity is the cell pattern)."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0):
+                 mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm"):
         self.grid = grid
         self.particles = particles
+        if not all(hasattr(integrator, a) for a in ("explicit", "setup", "step")):
+            raise TypeError(f"Simulation: 'integrator' must be an integrator such as fm.Explicit(), "
+                            f"fm.Newmark() or fm.QuasiStatic(), got {integrator!r}")
         self.integrator = integrator
         self.comm = grid.comm
         d = self.gdim = grid.gdim
@@ -78,8 +87,23 @@ class Simulation:
         self.on_leave, self.max_dt_cuts = on_leave, int(max_dt_cuts)
         self.removed_mass = 0.0
         self.removed_count = 0
+        self._work = None                            # local [external, boundary] work (monitor)
         self._n_alloc = -1
         self._all = np.zeros(0, dtype=np.int64)
+        if shape not in SHAPES:
+            raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
+        if shape != "mpm" and not integrator.explicit:
+            raise NotImplementedError(f"Simulation: shape={shape!r} with the implicit integrator "
+                                      f"{type(integrator).__name__}: the matrix sparsity covers "
+                                      f"one cell only; use an explicit integrator")
+        self.shape = shape
+        self._wide = None                            # GIMP/CPDI evaluator; None for "mpm"
+        if shape in ("ugimp", "cpgimp"):
+            from .kernels.gimp import GimpShape
+            self._wide = GimpShape(self, contiguous=shape == "cpgimp")
+        elif shape in ("cpdi1", "cpdi2"):
+            from .kernels.cpdi import CpdiShape
+            self._wide = CpdiShape(self, version=int(shape[-1]))
         integrator.setup(self)
 
     @property
@@ -89,6 +113,13 @@ class Simulation:
         central-difference limit, e.g. Omega_s(rho_b) / 2 for explicit generalized-alpha."""
         c = max(m.p_wave_speed for m in self.particles.materials)
         return getattr(self.integrator, "stability_factor", 1.0) * self.grid.h / c
+
+    @property
+    def courant(self):
+        """Courant number dt max c_p / h of the current step (reported on the progress line of
+        implicit runs; explicit runs are limited to their stability factor)."""
+        c = max(m.p_wave_speed for m in self.particles.materials)
+        return self.dt * c / self.grid.h
 
     def _check_dt(self, dt):
         if isinstance(dt, str):
@@ -266,9 +297,15 @@ class Simulation:
 
     def locate_and_shape(self):
         """Locate particles (only the ones that left their cell are searched on unstructured
-        meshes) and evaluate the shape functions at their positions."""
+        meshes) and evaluate the shape functions (of the family `shape`) at their positions."""
         p, g = self.particles, self.grid
         t0 = time.perf_counter()
+        if self._wide is not None:
+            if not self.integrator.explicit:
+                raise NotImplementedError(f"shape={self.shape!r} with the implicit integrator "
+                                          f"{type(self.integrator).__name__}: the matrix sparsity "
+                                          f"covers one cell only; use an explicit integrator")
+            self._wide.before_locate(self)
         p.cell, p.xi = g.locate(p.x, p.cell)
         ids, xs = p.send_to_owners()
         if len(ids):
@@ -277,15 +314,19 @@ class Simulation:
         t1 = time.perf_counter()
         n, nv = len(p), g.cell_nodes.shape[1]
         if n != self._n_alloc:
-            self.nodes = np.empty((n, nv), dtype=np.int32)
-            self.N = np.empty((n, nv))
-            self.dN = np.empty((n, nv, self.gdim))
+            if self._wide is None:
+                self.nodes = np.empty((n, nv), dtype=np.int32)
+                self.N = np.empty((n, nv))
+                self.dN = np.empty((n, nv, self.gdim))
             self._dF = np.empty((n, 3, 3))
             self._sigma_new = np.empty((n, 3, 3))
             self._state_new = np.empty_like(p.state)
             self._n_alloc = n
-        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad, g.affine_Jinv,
-                     self.nodes, self.N, self.dN)
+        if self._wide is None:
+            ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
+                         g.affine_Jinv, self.nodes, self.N, self.dN)
+        else:
+            self.nodes, self.N, self.dN = self._wide.evaluate(self)
         self.timers["locate"] += t1 - t0
         self.timers["shape"] += time.perf_counter() - t1
 
@@ -402,9 +443,70 @@ class Simulation:
         self.timers["constitutive"] += time.perf_counter() - t0
 
     def energy(self):
-        """Global kinetic and strain energy (collective)."""
+        """Global kinetic and strain energy, and with `monitor_energy` the work done by the
+        external loads (gravity, tractions, particle loads) and by Robin/absorbing boundaries
+        (negative: energy they took out) since monitoring started (collective)."""
         p = self.particles
-        return dict(kinetic=p.kinetic_energy(), strain=p.strain_energy())
+        e = dict(kinetic=p.kinetic_energy(), strain=p.strain_energy())
+        if self._work is not None:
+            w = self.comm.allreduce(self._work) if self.comm.size > 1 else self._work
+            e.update(external_work=float(w[0]), boundary_work=float(w[1]))
+        return e
+
+    def record_work(self, f_ext, f_boundary, v_start, v_end, dt):
+        """Integrators call this once per step when the energy is monitored: the work of the
+        nodal external and boundary forces over the step, dt f . (v_start + v_end) / 2, summed
+        over owned nodes (kept per rank; `energy` reduces it)."""
+        if self._work is None:
+            return
+        n = self.grid.n_owned_nodes
+        vm = 0.5 * (v_start[:n] + v_end[:n])
+        self._work[0] += dt * float(np.einsum("ij,ij->", f_ext[:n], vm))
+        if f_boundary is not None:
+            self._work[1] += dt * float(np.einsum("ij,ij->", f_boundary[:n], vm))
+
+    def monitor_energy(self, every=10, tolerance=0.02, path=None):
+        """Track the energy balance E_kin + E_strain - W_ext - W_boundary = E_0 every `every`
+        steps (history in `energy_history`, CSV at `path`) and warn, once, when its error
+        exceeds `tolerance` times the largest energy seen. Only the explicit integrators record
+        the external and boundary work; other integrators raise a ValueError here."""
+        if not getattr(self.integrator, "records_work", False):
+            raise ValueError(f"monitor_energy: {type(self.integrator).__name__} does not record "
+                             f"the work of external and boundary forces")
+        if not (isinstance(every, (int, np.integer)) and every >= 1):
+            raise ValueError(f"monitor_energy: 'every' must be a positive integer, got {every!r}")
+        if not (tolerance > 0):
+            raise ValueError(f"monitor_energy: 'tolerance' must be > 0, got {tolerance!r}")
+        self._work = np.zeros(2)
+        self.energy_history = []
+        writer = None
+        if path is not None:
+            writer = ProbeWriter(path, ["t", "kinetic", "strain", "external_work",
+                                        "boundary_work", "balance_error"], self.comm)
+        state = dict(e0=None, scale=0.0, warned=False)
+
+        def check(sim):
+            e = sim.energy()
+            total = e["kinetic"] + e["strain"]
+            if state["e0"] is None:
+                state["e0"] = total - e["external_work"] - e["boundary_work"]
+            state["scale"] = max(state["scale"], total, abs(e["external_work"]),
+                                 abs(e["boundary_work"]), 1e-300)
+            err = (total - e["external_work"] - e["boundary_work"] - state["e0"]) / state["scale"]
+            e.update(t=sim.t, balance_error=err)
+            sim.energy_history.append(e)
+            if writer is not None and sim.comm.rank == 0:
+                writer.write_row(e)
+            if abs(err) > tolerance and not state["warned"]:
+                state["warned"] = True
+                if sim.comm.rank == 0:
+                    warnings.warn(f"step {sim.step_count}, t = {sim.t:.6g}: energy balance error "
+                                  f"{err:.3%} of the largest energy exceeds {tolerance:.3%}",
+                                  RuntimeWarning, stacklevel=2)
+
+        check(self)
+        self.observe(check, every)
+        return self.energy_history
 
     # ------------------------------------------------------------------ time loop
     def _save_last_state(self, output, checkpoint):
@@ -490,7 +592,9 @@ class Simulation:
                 isinstance(checkpoint_every, (int, np.integer)) and checkpoint_every >= 1):
             raise ValueError(f"run: 'checkpoint_every' must be a positive integer, got {checkpoint_every!r}")
         t_final = self.t + steps * self.dt
-        bar = Progress(steps, t_final, self.comm, force=progress)
+        self.stats["courant"] = self.courant
+        note = "" if self.integrator.explicit else f"Courant {self.courant:.3g}"
+        bar = Progress(steps, t_final, self.comm, force=progress, note=note)
         if output is not None:
             output.open(self)
             if self.step_count == 0:
@@ -615,10 +719,19 @@ class Output:
 
     def open(self, sim):
         import os
+        err = None
         if sim.comm.rank == 0:
-            os.makedirs(self.path, exist_ok=True)
+            try:
+                os.makedirs(self.path, exist_ok=True)
+                probe = os.path.join(self.path, ".write_test")
+                open(probe, "w").close()
+                os.remove(probe)
+            except OSError as e:
+                err = str(e)
         if sim.comm.size > 1:
-            sim.comm.barrier()
+            err = sim.comm.bcast(err, root=0)
+        if err is not None:
+            raise ValueError(f"Output: 'path' {self.path!r} cannot be written ({err})")
         if self._pw is None:
             self._pw = ParticleWriter(os.path.join(self.path, "particles"), sim.comm)
         if self.grid_fields and self._xdmf is None:

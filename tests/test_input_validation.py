@@ -86,3 +86,68 @@ def test_unsupported_cell_type(comm):
     msh = dmesh.create_interval(comm, 4, [0.0, 1.0])
     with pytest.raises(ValueError, match=r"unsupported cell type 'interval'"):
         fm.Grid(msh)
+
+
+def test_integrator_must_be_an_integrator(setup):
+    grid, mat, pts = setup
+    with pytest.raises(TypeError, match=r"'integrator' must be an integrator.*'MUSL'"):
+        fm.Simulation(grid, pts, "MUSL", dt=1e-4)
+
+
+def test_gravity_and_traction_dimension_mismatch(setup):
+    grid, mat, pts = setup
+    with pytest.raises(ValueError, match=r"'gravity' must be a finite vector of length 2"):
+        fm.Simulation(grid, pts, fm.Explicit(), dt=1e-4, gravity=(0.0, 0.0, -9.81))
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-4)
+    with pytest.raises(ValueError, match=r"vector of length 2"):
+        sim.add_traction(lambda x: np.isclose(x[:, 1], 1.0), (0.0, 0.0, -1.0))
+        sim.run(steps=1)
+
+
+@pytest.mark.parametrize("per_cell", [0, -1, 1.5])
+def test_per_cell_not_a_positive_integer(setup, per_cell):
+    grid, mat, _ = setup
+    with pytest.raises(ValueError, match=f"'per_cell' must be a positive integer, got {per_cell}"):
+        fm.Particles.fill(grid, mat, per_cell=per_cell)
+
+
+def test_region_selecting_nothing(setup):
+    grid, mat, _ = setup
+    with pytest.raises(ValueError, match="region selects no particle"):
+        fm.Particles.fill(grid, mat, region=lambda x: x[:, 0] > 2.0)
+
+
+@pytest.mark.parametrize("t_end", [0.0, -1.0, float("nan")])
+def test_t_end_not_after_current_time(setup, t_end):
+    grid, mat, pts = setup
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-4)
+    with pytest.raises(ValueError, match="'t_end' must be > current time"):
+        sim.run(t_end=t_end)
+
+
+def test_misspelt_petsc_option_is_reported(setup):
+    grid, mat, pts = setup
+    with pytest.raises(ValueError, match=r"PETSc did not use \['ksp_tpye'\]"):
+        fm.Simulation(grid, pts, fm.Newmark(petsc_options={"ksp_tpye": "cg"}), dt=1e-3)
+
+
+def test_unwritable_output_path(setup):
+    grid, mat, pts = setup
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-4)
+    with pytest.raises(ValueError, match=r"Output: 'path' '/proc/fenicsmpm/out' cannot be written"):
+        sim.run(steps=1, output=fm.Output("/proc/fenicsmpm/out"))
+    assert sim.step_count == 0
+
+
+def test_courant_number_is_reported(setup):
+    """Courant = dt c_p / h with c_p = sqrt(M / rho), M = 1.2e6 Pa, h = 0.25."""
+    import io as _io
+    from fenicsmpm.io import Progress
+    grid, mat, pts = setup
+    sim = fm.Simulation(grid, pts, fm.Newmark(), dt=5e-3)
+    expected = 5e-3 * np.sqrt(1.2e6 / 1000.0) / 0.25
+    assert np.isclose(sim.courant, expected, rtol=1e-12)
+    sim.run(steps=1, progress=False)
+    assert sim.stats["courant"] == sim.courant
+    line = Progress(10, 1.0, None, stream=_io.StringIO(), note=f"Courant {sim.courant:.3g}").format(5, 0.5, 1.0)
+    assert line.endswith(f"Courant {expected:.3g}")

@@ -20,6 +20,7 @@ SCHEMES = ("USF", "USL", "MUSL")
 
 class Explicit:
     explicit = True
+    records_work = True
 
     def __init__(self, scheme="MUSL", flip=1.0):
         scheme = str(scheme).upper()
@@ -63,7 +64,9 @@ class Explicit:
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
-        f += sim.external_force(sim.t, m, active=active)
+        f_ext = sim.external_force(sim.t, m, active=active)
+        f += f_ext
+        fr = None
         if sim.robin is not None or sim.layers:    # Robin tractions from the start-of-step state
             fr = np.zeros_like(f)
             if sim.robin is not None:
@@ -74,6 +77,7 @@ class Explicit:
             f += fr
         t1 = time.perf_counter()
         v1 = v0 + dt * f * inv_m[:, None] * free
+        sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()

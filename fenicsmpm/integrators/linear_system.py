@@ -62,11 +62,16 @@ class LinearSystem:
         for k, v in merged.items():
             opts[prefix + k] = v
         self.ksp.setFromOptions()
+        unused = [k for k in (petsc_options or {}) if not _option_used(prefix + k)]
         for k in merged:
             opts.delValue(prefix + k)
             if k in saved:
                 opts[prefix + k] = saved[k]
         self.iterations = 0
+        if unused:
+            raise ValueError(f"petsc_options: PETSc did not use {sorted(unused)} (misspelt, or "
+                             f"not an option of the chosen KSP/PC); see the PETSc manual pages of "
+                             f"KSPSetFromOptions and PCSetFromOptions")
 
     def plan(self, nodes):
         """Scatter plan of the current particle-node connectivity (once per step)."""
@@ -130,6 +135,23 @@ def _is_number(s):
         return True
     except ValueError:
         return False
+
+
+_PETSC_LIB = None
+
+
+def _option_used(name):
+    """Whether PETSc read option `name` (no leading dash): PetscOptionsUsed, which petsc4py
+    3.18 does not wrap, called in the PETSc library petsc4py loaded (found in /proc/self/maps)."""
+    import ctypes
+    global _PETSC_LIB
+    if _PETSC_LIB is None:
+        with open("/proc/self/maps") as maps:
+            paths = [ln.split()[-1] for ln in maps if "/libpetsc" in ln]
+        _PETSC_LIB = ctypes.CDLL(paths[0])
+    used = ctypes.c_int(0)
+    _PETSC_LIB.PetscOptionsUsed(None, name.encode(), ctypes.byref(used))
+    return bool(used.value)
 
 
 def _reason_name(code):

@@ -34,12 +34,13 @@ class Progress:
     """
 
     def __init__(self, total_steps, t_end, comm, stream=None, min_interval=0.5,
-                 force=None, delay=3.0):
+                 force=None, delay=3.0, note=""):
         self.total_steps = int(total_steps) if total_steps else 0
         self.t_end = float(t_end) if t_end else 0.0
         self.stream = sys.stderr if stream is None else stream
         self.min_interval = float(min_interval)
         self.delay = float(delay)
+        self.note = f"  {note}" if note else ""
         rank = comm.Get_rank() if comm is not None else 0
         if force is None:
             self.enabled = rank == 0 and _isatty(self.stream)
@@ -69,7 +70,7 @@ class Progress:
             head += f" ({100.0 * frac:.1f} %)"
         eta = elapsed * (1.0 - frac) / frac if frac else None
         return (f"{head}  t = {float(t):.1e} s  wall {format_duration(elapsed)}"
-                f"  ETA {format_duration(eta)}")
+                f"  ETA {format_duration(eta)}{self.note}")
 
     def update(self, step, t):
         """Maybe rewrite the progress line (cheap no-op when disabled)."""
