@@ -10,6 +10,7 @@ import numpy as np
 
 from .boundaries import ParticleLayer, Robin, RobinForms, Traction, TractionForms, fixed_dofs
 from .boundaries import particle_layer as kl
+from .boundaries.friction import FrictionalBoundary
 from .boundaries.robin import facets_on_boundary
 from .guards import ParticlesLeftMesh, check_particles
 from .io import ParticleWriter, Progress, ProbeWriter
@@ -67,6 +68,7 @@ class Simulation:
         self._traction_forms = None
         self._warned_traction = False
         self.particle_loads = []
+        self.frictions = []
         self.boundaries = []
         self._robin = None
         self.layers = []
@@ -191,6 +193,9 @@ class Simulation:
           from the start of the stage."""
         p = self.particles
         if integrator is not None:
+            if self.frictions and not integrator.explicit:
+                raise NotImplementedError("start_stage: frictional boundaries need an explicit "
+                                          f"integrator, not {type(integrator).__name__}")
             self.integrator = integrator
             integrator.setup(self)
             self._robin = None                    # recompile for the new integrator
@@ -212,6 +217,16 @@ class Simulation:
                 p.layer_u0[:] = 0.0
         p.a[:] = 0.0
         self.stage_start = self.t
+
+    def add_friction(self, where, mu, normal):
+        """A rigid, flat frictional boundary on the grid nodes where(x) with outward unit normal
+        `normal` and Coulomb coefficient `mu` (boundaries.friction; seed 002 §5.1): no
+        penetration, separation allowed, stick or slip. Explicit integrators only; do not also
+        `fix` the normal component there."""
+        if not self.integrator.explicit:
+            raise NotImplementedError(f"add_friction: frictional boundaries need an explicit "
+                                      f"integrator, not {type(self.integrator).__name__}")
+        self.frictions.append(FrictionalBoundary(where, mu, normal).bind(self.grid))
 
     def add_traction(self, where, value):
         """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""

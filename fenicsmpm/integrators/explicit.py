@@ -37,6 +37,12 @@ class Explicit:
         """v_i = (m v)_i / m_i on active nodes, 0 on inactive nodes and fixed components."""
         return momentum * inv_m[:, None] * free
 
+    @staticmethod
+    def _contact(sim, v):
+        """Frictional boundaries project the nodal velocities (boundaries.friction)."""
+        for b in sim.frictions:
+            b.apply(v)
+
     def _stress_update(self, sim, v_grid, dt):
         dF = sim._dF
         t0 = time.perf_counter()
@@ -77,6 +83,11 @@ class Explicit:
             f += fr
         t1 = time.perf_counter()
         v1 = v0 + dt * f * inv_m[:, None] * free
+        if sim.frictions:                           # contact force m (v1 - v1_trial) / dt
+            v_trial = v1.copy()
+            self._contact(sim, v1)
+            fc = m[:, None] * (v1 - v_trial) / dt
+            fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
@@ -88,6 +99,7 @@ class Explicit:
             mv2 = sim.nodal_weighted(p.v)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
+            self._contact(sim, v1)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             self._stress_update(sim, v1, dt)
