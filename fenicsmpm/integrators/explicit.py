@@ -6,7 +6,9 @@ particles: x_p += dt sum N v^{n+1}, v_p by the FLIP/PIC blend, and the stress fr
 dF = I + dt L with L = sum v_i (x) grad N_i, taken from
     USF:  v^n            before the forces (stress updated first),
     USL:  v^{n+1}        after the grid update,
-    MUSL: v^{n+1} re-mapped from the updated particle momenta (Sulsky et al. 1995).
+    MUSL: v^{n+1} re-mapped from the updated particle momenta (Sulsky et al. 1995),
+    AVG:  half steps: dt/2 with v^n before the forces, dt/2 with the re-mapped v^{n+1}
+          after them (seed 002 §4.4, "combining the two formulations", steps 1-8).
 Nodes with a mass below the simulation's mass tolerance are inactive: zero velocity,
 no division by their mass."""
 import time
@@ -15,7 +17,7 @@ import numpy as np
 
 from ..kernels import transfer as kt
 
-SCHEMES = ("USF", "USL", "MUSL")
+SCHEMES = ("USF", "USL", "MUSL", "AVG")
 
 
 class Explicit:
@@ -64,8 +66,8 @@ class Explicit:
         free = ~sim.fixed
         v0 = self._grid_velocity(mv, inv_m, free)
         T["solve"] += time.perf_counter() - t0
-        if self.scheme == "USF":
-            self._stress_update(sim, v0, dt)
+        if self.scheme in ("USF", "AVG"):
+            self._stress_update(sim, v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
@@ -95,14 +97,14 @@ class Explicit:
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
-        if self.scheme == "MUSL":
+        if self.scheme in ("MUSL", "AVG"):
             mv2 = sim.nodal_weighted(p.v)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
             self._contact(sim, v1)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
-            self._stress_update(sim, v1, dt)
+            self._stress_update(sim, v1, dt if self.scheme != "AVG" else 0.5 * dt)
         if sim.robin is not None:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active)
