@@ -75,12 +75,14 @@ def gaussian_pulse(t):
 
 def absorbing_column(integrator, base="viscous", dx=0.5, height=100.0, width=None, per_cell=2,
                      dt=None, spring="deeks-randolph", r_b=None, angle=0.0, delta=None,
-                     rollers=None, depths=DEPTHS, load=None, cfl=0.5, comm=MPI.COMM_WORLD):
+                     rollers=None, depths=DEPTHS, load=None, cfl=0.5, comm=MPI.COMM_WORLD,
+                     partitioner=None):
     """W1: the column described in the module docstring. Returns (sim, exact).
 
     dt: None -> "auto" (cfl * dx / c_p) for explicit integrators, 0.005 s (W1) for implicit
     ones; or a number. load: the surface pressure p(t) in Pa (default the W1 pulse).
-    exact["probes"] maps each depth to its Probe."""
+    exact["probes"] maps each depth to its Probe. partitioner: an optional dolfinx cell
+    partitioner for the mesh (e.g. fm.partition.strips(1, ny, axis=1) for reproducible runs)."""
     if width is None:
         width = dx
     for name, val in (("dx", dx), ("height", height), ("width", width)):
@@ -100,8 +102,9 @@ def absorbing_column(integrator, base="viscous", dx=0.5, height=100.0, width=Non
                          "expressible with fix() (Cartesian components only); use rollers=False")
     load = gaussian_pulse if load is None else load
 
+    extra = {} if partitioner is None else {"partitioner": partitioner}
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [width, height]], [nx, ny],
-                                 dmesh.CellType.quadrilateral)
+                                 dmesh.CellType.quadrilateral, **extra)
     th = math.radians(angle)
     R = np.array([[math.cos(th), -math.sin(th)], [math.sin(th), math.cos(th)]])
     if angle != 0.0:

@@ -11,10 +11,13 @@ Layout of a checkpoint directory `path`:
 Every file is written under a temporary name and renamed; LATEST is switched by rank 0 only
 after all ranks have renamed their files, and older checkpoints are removed after that.
 
-Restart on the same number of ranks reads each rank's own file back in the same particle
-order, so an explicit run continues bit for bit. On another number of ranks, rank r reads the
-particle files k with k % size == r and hands particles to the ranks owning their cells;
-nodal arrays are matched by global node index."""
+Rank r reads the particle files k with k % size == r (its own file on the same number of
+ranks), locates the particles on its part of the mesh and hands the others to the ranks owning
+their cells; nodal arrays are matched by node coordinates. dolfinx's graph partitioners
+(SCOTCH/ParMETIS) do not cut a mesh the same way twice, so the restored run is bit for bit the
+continuous one on one rank, or on several ranks when the mesh is built with a deterministic
+partitioner (the particle order and the summation order are then the same); otherwise it
+agrees to round-off."""
 import json
 import os
 import shutil
@@ -30,9 +33,10 @@ def _integrator_arrays(integrator):
     return dict(get()) if get is not None else {}
 
 
-def _node_gids(grid):
-    imap = grid.V.dofmap.index_map
-    return imap.local_to_global(np.arange(grid.n_nodes, dtype=np.int32)).astype(np.int64)
+def _rows(x):
+    """Rows of a float array as opaque byte strings (exact matching of coordinates)."""
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    return x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
 
 
 def _write_atomic(fname, write):
@@ -54,10 +58,11 @@ def write(sim, path, keep=1):
     if comm.size > 1:
         comm.barrier()
     arrays = {f"p.{f}": getattr(p, f) for f in p.field_names()}
-    arrays["node_gid"] = _node_gids(grid)
-    arrays["node.robin_u"] = sim.robin_u
+    arrays["node_x"] = grid.node_x[: grid.n_owned_nodes]
+    n = grid.n_owned_nodes
+    arrays["node.robin_u"] = sim.robin_u[:n]
     for k, a in _integrator_arrays(sim.integrator).items():
-        arrays[f"node.integrator.{k}"] = a
+        arrays[f"node.integrator.{k}"] = a[:n]
     for k, pr in enumerate(sim.probes):
         arrays[f"probe.{k}"] = np.array(pr.rows, dtype=np.float64).reshape(-1, len(pr.columns))
     _write_atomic(os.path.join(folder, f"rank{comm.rank}.npz"), lambda f: np.savez(f, **arrays))
@@ -67,7 +72,8 @@ def write(sim, path, keep=1):
                 ranks=comm.size, gdim=sim.gdim, n_particles=p.n_global,
                 n_nodes=grid.V.dofmap.index_map.size_global,
                 materials=[type(m).__name__ for m in p.materials],
-                optional=list(p.optional), n_probes=len(sim.probes))
+                optional=list(p.optional), n_probes=len(sim.probes),
+                split_count=0 if sim.splitting is None else sim.splitting.count)
     if comm.size > 1:
         comm.barrier()                         # every rank file is complete
     if comm.rank == 0:
@@ -116,13 +122,11 @@ def _check(sim, meta):
 
 def read(sim, path):
     """Restore `sim` from the newest checkpoint under `path` (collective)."""
-    from .particles import FIELDS
     comm, p, grid = sim.comm, sim.particles, sim.grid
     folder, meta = _latest(path, comm)
     _check(sim, meta)
-    same = meta["ranks"] == comm.size
-    mine = [comm.rank] if same else list(range(comm.rank, meta["ranks"], comm.size))
-    files = [np.load(os.path.join(folder, f"rank{r}.npz")) for r in mine]
+    files = [np.load(os.path.join(folder, f"rank{r}.npz"))
+             for r in range(comm.rank, meta["ranks"], comm.size)]
     for name in meta["optional"]:
         a = files[0][f"p.{name}"] if files else None
         if not hasattr(p, name):
@@ -136,23 +140,20 @@ def read(sim, path):
             arr = np.zeros((0,) + getattr(p, name).shape[1:], dtype=getattr(p, name).dtype)
         setattr(p, name, arr)
     p.version += 1
-    if not same:
-        p.cell, p.xi = grid.locate(p.x)
-        out_ids, _ = p.send_to_owners()
-        if len(out_ids):
-            raise RuntimeError(f"restore: particles {out_ids[:5].tolist()} lie outside the mesh")
-        p.version += 1
-    # nodal state, matched by global node index (all files when the rank count changed)
-    gid = _node_gids(grid)
-    order = np.argsort(gid)
+    p.cell, p.xi = grid.locate(p.x)            # the partition may differ from the saved one
+    out_ids, _ = p.send_to_owners()
+    if len(out_ids):
+        raise RuntimeError(f"restore: particles {out_ids[:5].tolist()} lie outside the mesh")
+    # nodal state (owned rows of every rank file), matched by node coordinates, ghosts included
+    mine = _rows(grid.node_x)
+    order = np.argsort(mine)
     targets = {"node.robin_u": sim.robin_u}
     targets.update({f"node.integrator.{k}": a for k, a in _integrator_arrays(sim.integrator).items()})
-    sources = files if same else [np.load(os.path.join(folder, f"rank{r}.npz"))
-                                  for r in range(meta["ranks"])]
-    for f in sources:
-        g = f["node_gid"]
-        pos = np.searchsorted(gid[order], g)
-        ok = (pos < len(gid)) & (gid[order][np.minimum(pos, len(gid) - 1)] == g)
+    for r in range(meta["ranks"]):
+        f = np.load(os.path.join(folder, f"rank{r}.npz"))
+        theirs = _rows(f["node_x"])
+        pos = np.minimum(np.searchsorted(mine[order], theirs), len(mine) - 1)
+        ok = mine[order][pos] == theirs
         local = order[pos[ok]]
         for key, target in targets.items():
             if key in f.files:
@@ -170,9 +171,11 @@ def read(sim, path):
     sim.t, sim.step_count, sim.dt = meta["t"], meta["step_count"], meta["dt"]
     sim.stage_start, sim.initial_stress = meta["stage_start"], meta["initial_stress"]
     sim.gravity = np.asarray(meta["gravity"], dtype=np.float64)
+    if sim.splitting is not None:
+        sim.splitting.sync_ids(sim)
+        sim.splitting.count = meta.get("split_count", 0)
     restore = getattr(sim.integrator, "restore_arrays", None)
     if restore is not None:
         restore(sim)
     sim._n_alloc = -1                          # per-particle work arrays are re-sized
-    assert set(FIELDS) <= set(p.field_names())
     return sim

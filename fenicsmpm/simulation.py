@@ -13,6 +13,7 @@ from .boundaries import particle_layer as kl
 from .boundaries.friction import FrictionalBoundary
 from .boundaries.robin import facets_on_boundary
 from .guards import ParticlesLeftMesh, check_particles
+from .splitting import Splitting
 from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
@@ -69,6 +70,7 @@ class Simulation:
         self._warned_traction = False
         self.particle_loads = []
         self.frictions = []
+        self.splitting = None
         self.boundaries = []
         self._robin = None
         self.layers = []
@@ -227,6 +229,15 @@ class Simulation:
             raise NotImplementedError(f"add_friction: frictional boundaries need an explicit "
                                       f"integrator, not {type(self.integrator).__name__}")
         self.frictions.append(FrictionalBoundary(where, mu, normal).bind(self.grid))
+
+    def enable_splitting(self, alpha=2.0, beta=0.5, gamma=1.0, every=1):
+        """Split particles whose voxel stretched beyond alpha, shrank below beta or sheared
+        beyond gamma since their creation (seed 002 §3.4.1 eq 3.25; fenicsmpm.splitting).
+        The number split so far is `splitting.count`; the last step's is stats["split"]."""
+        if self.layers:
+            raise ValueError("enable_splitting: particle-layer boundaries cannot be split")
+        self.splitting = Splitting(self, alpha, beta, gamma, every)
+        return self.splitting
 
     def add_traction(self, where, value):
         """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
@@ -453,6 +464,8 @@ class Simulation:
         p = self.particles
         t0 = time.perf_counter()
         kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work)
+        if self.splitting is not None:
+            self.splitting.push_forward(self, dF)
         if p.state.shape[1]:
             p.state[:] = self._state_new
         self.timers["constitutive"] += time.perf_counter() - t0
@@ -555,6 +568,8 @@ class Simulation:
         t0 = time.perf_counter()
         check_particles(self)
         self.timers["guards"] += time.perf_counter() - t0
+        if self.splitting is not None:
+            self.stats["split"] = self.splitting.apply(self)
         for pr in self.probes:
             pr.record()
         for callback, every in self.observers:

@@ -12,9 +12,14 @@ from .particles import Particles
 from .simulation import Simulation
 
 
+def _partitioner(partitioner):
+    """create_rectangle keyword for an optional cell partitioner (e.g. fm.partition.strips)."""
+    return {} if partitioner is None else {"partitioner": partitioner}
+
+
 def vibrating_bar(integrator, n_cells=20, per_cell=2, dt=None, cfl=0.2, length=1.0, E=100.0,
                   density=1.0, v0=0.1, cell_type=dmesh.CellType.quadrilateral,
-                  comm=MPI.COMM_WORLD):
+                  comm=MPI.COMM_WORLD, partitioner=None):
     """V1: axially vibrating bar, fixed at x = 0, free at x = L, v(x, 0) = v0 sin(pi x / 2L).
 
     Plane strain with nu = 0 and the transverse motion fixed, so the bar is 1D. The mesh
@@ -22,7 +27,8 @@ def vibrating_bar(integrator, n_cells=20, per_cell=2, dt=None, cfl=0.2, length=1
     Exact: v(x, t) = v0 cos(w t) sin(pi x / 2L), w = (pi / 2L) sqrt(E / rho).
     dt defaults to cfl * h / c (explicit) or to 5 h / c (implicit)."""
     h = length / n_cells
-    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [length + 2 * h, h]], [n_cells + 2, 1], cell_type)
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [length + 2 * h, h]], [n_cells + 2, 1], cell_type,
+                                 **_partitioner(partitioner))
     grid = Grid(msh)
     mat = LinearElastic(E=E, nu=0.0, density=density)
     k = np.pi / (2 * length)
@@ -73,9 +79,8 @@ def colliding_discs(integrator, n_cells=20, per_cell=2, cfl=0.5, speed=0.1,
     (Sulsky et al. 1995). No boundary conditions, no gravity: total momentum stays zero, and
     kinetic energy turns into strain energy during the impact (which starts at t ~ 1.59 s).
     `partitioner` (a dolfinx cell partitioner) fixes where the mesh is cut across ranks."""
-    extra = {} if partitioner is None else {"partitioner": partitioner}
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells], cell_type,
-                                 **extra)
+                                 **_partitioner(partitioner))
     grid = Grid(msh)
     mat = LinearElastic(E=1000.0, nu=0.3, density=1000.0)
     centres = np.array([[0.2, 0.2], [0.8, 0.8]])

@@ -10,7 +10,7 @@ from mpi4py import MPI
 import fenicsmpm as fm
 from fenicsmpm.absorbing_column import absorbing_column
 from fenicsmpm.verification import colliding_discs, vibrating_bar
-from partition_helpers import strip_partitioner
+from fenicsmpm.partition import strips
 
 WORLD = MPI.COMM_WORLD
 
@@ -43,7 +43,7 @@ def _restart_matches(build, n1, n2, path, exact=True, rtol=1e-12):
 
 
 def test_explicit_bar_restart_is_bit_for_bit(shared_tmp_path):
-    build = lambda: vibrating_bar(fm.Explicit("MUSL"), n_cells=16)[0]
+    build = lambda: vibrating_bar(fm.Explicit("MUSL"), n_cells=16, partitioner=strips(18, 1))[0]
     _restart_matches(build, 30, 30, os.path.join(shared_tmp_path, "ck"))
 
 
@@ -52,7 +52,7 @@ def test_restart_with_migration_and_probe_is_bit_for_bit(shared_tmp_path):
     the checkpoint survive the restart."""
     def build():
         sim, _ = colliding_discs(fm.Explicit("USL"), n_cells=12, cfl=0.3, speed=0.2,
-                                 partitioner=strip_partitioner(12))
+                                 partitioner=strips(12, 12))
         sim.probe((0.3, 0.3), fields=("velocity", "stress"))
         return sim
     ref, again = _restart_matches(build, 25, 25, os.path.join(shared_tmp_path, "ck"))
@@ -64,19 +64,19 @@ def test_absorbing_boundary_restart_is_bit_for_bit(shared_tmp_path):
     """W1 column with a viscoelastic base: the boundary springs' reference displacements are
     part of the checkpoint."""
     build = lambda: absorbing_column(fm.Explicit("MUSL"), base="viscoelastic", dx=2.0,
-                                     height=40.0)[0]
+                                     height=40.0, partitioner=strips(1, 20, axis=1))[0]
     _restart_matches(build, 40, 40, os.path.join(shared_tmp_path, "ck"))
 
 
 def test_newmark_restart_to_solver_tolerance(shared_tmp_path):
-    build = lambda: vibrating_bar(fm.Newmark(), n_cells=10)[0]
+    build = lambda: vibrating_bar(fm.Newmark(), n_cells=10, partitioner=strips(12, 1))[0]
     _restart_matches(build, 6, 6, os.path.join(shared_tmp_path, "ck"), exact=False, rtol=1e-10)
 
 
 def test_staged_restart_keeps_initial_stress(shared_tmp_path):
     """A checkpoint taken in a second stage (optional field stress_initial) restores it."""
     def build():
-        sim, _ = vibrating_bar(fm.Explicit("MUSL"), n_cells=12)
+        sim, _ = vibrating_bar(fm.Explicit("MUSL"), n_cells=12, partitioner=strips(14, 1))
         sim.particles.stress[:, 0, 0] = -3.0
         sim.start_stage(initial_stress=True)
         return sim
@@ -90,7 +90,7 @@ def test_staged_restart_keeps_initial_stress(shared_tmp_path):
 
 def test_run_killed_between_checkpoints_restarts_from_the_last_one(shared_tmp_path):
     path = os.path.join(shared_tmp_path, "ck")
-    build = lambda: vibrating_bar(fm.Explicit("MUSL"), n_cells=16)[0]
+    build = lambda: vibrating_bar(fm.Explicit("MUSL"), n_cells=16, partitioner=strips(18, 1))[0]
     ref = build()
     ref.run(steps=40)
     crashed = build()

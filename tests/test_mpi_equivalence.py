@@ -9,7 +9,7 @@ from dolfinx import mesh
 
 import fenicsmpm as fm
 from fenicsmpm.verification import colliding_discs, vibrating_bar
-from partition_helpers import assert_strips, strip_partitioner
+from fenicsmpm.partition import check_strips, strips
 
 WORLD = MPI.COMM_WORLD
 
@@ -27,14 +27,14 @@ def _moved_ranks(p, ids_before, comm):
     return comm.allreduce(int(np.count_nonzero(~np.isin(p.id, ids_before))))
 
 
-def _compare(build, steps, rtol, strips=False):
-    """Run `build(comm)` on one rank and on all; with `strips`, the parallel mesh is cut into
-    vertical strips (partition_helpers), so that moving particles must change rank."""
+def _compare(build, steps, rtol, cut=False):
+    """Run `build(comm)` on one rank and on all; with `cut`, the parallel mesh is cut into
+    vertical strips (fenicsmpm.partition), so that moving particles must change rank."""
     ref, _ = build(MPI.COMM_SELF)
     ref.run(steps=steps)
     par, _ = build(WORLD)
-    if strips:
-        assert_strips(par.grid.mesh)
+    if cut:
+        check_strips(par.grid.mesh)
     ids0 = par.particles.id.copy()
     par.run(steps=steps)
     x_ref, v_ref = _by_initial_position(ref.particles, MPI.COMM_SELF)
@@ -50,8 +50,8 @@ def test_explicit_colliding_discs_equivalence():
     """BENCHMARKS L2 (discs meet at t ~ 1.59 s; 200 steps reach 2.6 s): same velocities on
     1 and N ranks to 1e-10, with particles crossing rank boundaries."""
     moved = _compare(lambda c: colliding_discs(fm.Explicit("MUSL"), cfl=0.3, comm=c,
-                                               partitioner=strip_partitioner(20)), 200, 1e-10,
-                     strips=True)
+                                               partitioner=strips(20, 20)), 200, 1e-10,
+                     cut=True)
     if WORLD.size > 1:
         assert moved > 0, "no particle crossed a rank boundary: the test would prove nothing"
 
@@ -66,8 +66,8 @@ def test_implicit_newmark_equivalence_iterative_ksp():
     opts = {"ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-14, "ksp_atol": 1e-30,
             "ksp_max_it": 10000}
     moved = _compare(lambda c: colliding_discs(fm.Newmark(petsc_options=opts, rtol=1e-10), comm=c,
-                                               partitioner=strip_partitioner(20)), 30, 1e-8,
-                     strips=True)
+                                               partitioner=strips(20, 20)), 30, 1e-8,
+                     cut=True)
     if WORLD.size > 1:
         assert moved > 0
 
@@ -77,8 +77,8 @@ def test_particle_crossing_back_and_forth_is_owned_at_every_step():
     comes back, crossing rank boundaries both ways: at every step each particle sits on the
     rank owning its cell, and mass is exactly conserved."""
     msh = mesh.create_rectangle(WORLD, [[0, 0], [1, 1]], [12, 12], mesh.CellType.quadrilateral,
-                                partitioner=strip_partitioner(12))
-    assert_strips(msh)
+                                partitioner=strips(12, 12))
+    check_strips(msh)
     grid = fm.Grid(msh)
     mat = fm.LinearElastic(E=100.0, nu=0.3, density=1.0)
     p = fm.Particles.fill(grid, mat, per_cell=2,
