@@ -13,6 +13,7 @@ from .boundaries import particle_layer as kl
 from .boundaries.friction import FrictionalBoundary
 from .boundaries.robin import facets_on_boundary
 from .guards import ParticlesLeftMesh, check_particles
+from .smoothing import smoothed_stress
 from .splitting import Splitting
 from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
@@ -36,6 +37,9 @@ class Simulation:
     reported as a warning).
     max_dt_cuts: implicit runs only: when Newton or the KSP fails, retry the step as two
     half steps, at most this many halvings deep (each retry is logged as a warning).
+    stress_feedback: None, or "smoothed": explicit runs compute the internal force from the
+    grid-smoothed stress (fenicsmpm.smoothing, seed 002 eqs 4.18-4.19) instead of the
+    particle stress; the constitutive update still acts on the particle stress.
     shape: the shape-function family, one of SHAPES: "mpm" (the Lagrange basis of the
     particle's cell), "ugimp"/"cpgimp" (kernels.gimp: structured quadrilateral/hexahedral
     grids), "cpdi1"/"cpdi2" (kernels.cpdi: any 2D P1/Q1 mesh). The wider families need, in
@@ -43,7 +47,8 @@ class Simulation:
     integrator (the implicit sparsity is the cell pattern)."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm"):
+                 mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm",
+                 stress_feedback=None):
         self.grid = grid
         self.particles = particles
         if not all(hasattr(integrator, a) for a in ("explicit", "setup", "step")):
@@ -89,6 +94,11 @@ class Simulation:
         if not (isinstance(max_dt_cuts, (int, np.integer)) and 0 <= max_dt_cuts <= 20):
             raise ValueError(f"Simulation: 'max_dt_cuts' must be an integer in [0, 20], got {max_dt_cuts!r}")
         self.on_leave, self.max_dt_cuts = on_leave, int(max_dt_cuts)
+        if stress_feedback not in (None, "smoothed"):
+            raise ValueError(f"Simulation: 'stress_feedback' must be None or 'smoothed', got {stress_feedback!r}")
+        if stress_feedback is not None and not integrator.explicit:
+            raise NotImplementedError("Simulation: stress_feedback='smoothed' needs an explicit integrator")
+        self.stress_feedback = stress_feedback
         self.removed_mass = 0.0
         self.removed_count = 0
         self._work = None                            # local [external, boundary] work (monitor)
@@ -422,8 +432,16 @@ class Simulation:
 
     def dynamic_stress(self, stress):
         """stress - sigma_ini in a stage started with initial_stress=True (seed 000 §3.5: the
-        internal force comes from sigma_dyn), else stress itself."""
-        return stress - self.particles.stress_initial if self.initial_stress else stress
+        internal force comes from sigma_dyn), else stress itself; grid-smoothed with
+        stress_feedback="smoothed"."""
+        s = stress - self.particles.stress_initial if self.initial_stress else stress
+        return smoothed_stress(self, s) if self.stress_feedback == "smoothed" else s
+
+    def smoothed_stress(self):
+        """The grid-smoothed particle stress (seed 002 eqs 4.18-4.19) at the current particle
+        positions, e.g. for output (Output particle field "stress_smoothed"); collective."""
+        self.locate_and_shape()
+        return smoothed_stress(self, self.particles.stress)
 
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
@@ -775,7 +793,9 @@ class Output:
 
     def write(self, sim):
         p = sim.particles
-        self._pw.write(sim.t, p.x, {f: getattr(p, f) for f in self.particle_fields})
+        smooth = sim.smoothed_stress() if "stress_smoothed" in self.particle_fields else None
+        fields = {f: smooth if f == "stress_smoothed" else getattr(p, f) for f in self.particle_fields}
+        self._pw.write(sim.t, p.x, fields)            # after smoothing (it may migrate particles)
         if self._xdmf is not None and "velocity" in sim.nodal:
             self._vel.x.array[:] = sim.nodal["velocity"].ravel()
             self._dens.x.array[:] = sim.nodal["mass"]
