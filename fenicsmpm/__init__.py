@@ -8,10 +8,11 @@
 """
 from .grid import Grid
 from .particles import Particles
-from .materials import LinearElastic, NeoHookean
+from .materials import LinearElastic, NeoHookean, MohrCoulomb, VonMises
 from .integrators import Explicit, Newmark, QuasiStatic
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .simulation import Simulation, Probe, Output
+from . import partition
 
 __version__ = "0.1.0"
 
@@ -34,5 +35,5 @@ def _abort_all_ranks_on_uncaught_exception():
 
 
 _abort_all_ranks_on_uncaught_exception()
-__all__ = ["Grid", "Particles", "LinearElastic", "NeoHookean", "Explicit", "Newmark",
+__all__ = ["Grid", "Particles", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "Explicit", "Newmark",
            "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic", "ParticleLayer"]

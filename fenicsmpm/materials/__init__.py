@@ -14,8 +14,10 @@ Interface of a material (see LinearElastic):
     density, p_wave_speed        for masses and the critical time step
 """
 from .linear_elastic import LinearElastic
+from .mohr_coulomb import MohrCoulomb
 from .neo_hookean import NeoHookean
+from .von_mises import VonMises
 from .piola import first_piola, first_piola_tangent, strain_energy_increment
 
-__all__ = ["LinearElastic", "NeoHookean", "first_piola", "first_piola_tangent",
-           "strain_energy_increment"]
+__all__ = ["LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
+           "first_piola_tangent", "strain_energy_increment"]

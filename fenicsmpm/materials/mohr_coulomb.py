@@ -1,0 +1,526 @@
+"""Non-associated Mohr-Coulomb elasto-plasticity with tension cut-off and exponential softening.
+
+Principal stresses sigma_1 <= sigma_2 <= sigma_3, tension positive (seed 002 eqs 5.1-5.4):
+    yield      f = 1/2 (sigma_3 - sigma_1) + 1/2 (sigma_1 + sigma_3) sin(phi) - c cos(phi)   (5.1)
+    flow       d eps^p = d lambda dg/dsigma                                                 (5.3)
+    potential  g = 1/2 (sigma_3 - sigma_1) + 1/2 (sigma_1 + sigma_3) sin(psi)               (5.4)
+    optional tension cut-off  f_t = sigma_3 - sigma_t  (associated).
+Strain softening (seed 003 eqs 20-21, the Anura3D MCSS law):
+    x = x_res + (x_peak - x_res) exp(-eta eps_d^p),   x = phi, c,
+with the accumulated plastic deviatoric strain eps_d^p = sum sqrt(2/3 de^p : de^p), de^p the
+deviatoric part of the plastic strain increment; psi is not softened (psi <= phi_res).
+
+Integration (Clausen, Damkilde & Andersen 2006, 2007): an elastic predictor
+    sigma_tr = sigma_old + omega sigma_old - sigma_old omega + lambda tr(eps) I + 2 mu eps
+(Jaumann rate as in LinearElastic), then a return in principal stress space where every yield
+plane is linear and the elastic matrix is D_ij = lambda + 2 mu d_ij:
+    sigma = sigma_tr - D sum_a dlambda_a b_a,   f_a(sigma, kappa_n + d kappa) = 0 (a active).
+The active set is the first admissible one among the plane, the two MC edges (sigma_1 = sigma_2,
+sigma_2 = sigma_3), the cut-off plane, its edges and corners (dlambda >= 0, order preserved,
+all yield functions <= 0); with softening each set is solved by Newton on dlambda.  Where none
+is admissible the stress returns to the MC apex sigma_i = c cot(phi), with d kappa =
+sqrt(2/3) |dev sigma_tr| / (2 mu) (for psi = 0 the isochoric flow cannot reach the apex; the
+apex return is then the closest admissible state, as in Clausen et al.).
+Eigenvectors are unchanged by the return.  The consistent tangent is
+    d sigma_p / d sigma_tr_p = I + D B J^-1 A^T     (principal, J = d f / d dlambda)
+assembled with the spectral derivative (off-diagonal eigenbasis terms
+(sigma_i - sigma_j) / (sigma_tr_i - sigma_tr_j)) and chained with the Jaumann elastic predictor.
+
+History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
+                         1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p).
+"""
+import math
+
+import numba
+import numpy as np
+
+from .linear_elastic import IsotropicElasticParameters
+from .validation import check_real
+
+__all__ = ["MohrCoulomb", "mohr_coulomb_stress_kernel", "mohr_coulomb_tangent_kernel"]
+
+# yield planes in principal space: (minor index, major index) for the MC planes 0-2,
+# then the cut-off planes 3-5 on sigma_3, sigma_2, sigma_1
+_MINOR = np.array([0, 0, 1], dtype=np.int64)
+_MAJOR = np.array([2, 1, 2], dtype=np.int64)
+_TCUT = np.array([2, 1, 0], dtype=np.int64)
+# candidate active sets (-1 = unused), tried in order
+_SETS = np.array([[0, -1, -1], [3, -1, -1], [0, 1, -1], [0, 2, -1], [3, 4, -1], [0, 3, -1],
+                  [0, 2, 3], [0, 1, 3], [0, 1, 4], [0, 3, 4], [1, 3, 4], [3, 4, 5]],
+                 dtype=np.int64)
+_SQ23 = math.sqrt(2.0 / 3.0)
+
+
+@numba.njit(cache=True)
+def _soft(x_peak, x_res, eta, kappa):
+    """x = x_res + (x_peak - x_res) exp(-eta kappa) and dx/dkappa."""
+    e = math.exp(-eta * kappa)
+    return x_res + (x_peak - x_res) * e, -eta * (x_peak - x_res) * e
+
+
+@numba.njit(cache=True)
+def _plane(pid, sig, sphi, cphi, c, dphi, dc, spsi, st, a, b):
+    """Value of plane `pid` at principal stress `sig`; its gradient a, flow direction b;
+    returns (f, df/dkappa)."""
+    for i in range(3):
+        a[i] = 0.0
+        b[i] = 0.0
+    if pid < 3:
+        i = _MINOR[pid]
+        j = _MAJOR[pid]
+        a[i] = -0.5 * (1.0 - sphi)
+        a[j] = 0.5 * (1.0 + sphi)
+        b[i] = -0.5 * (1.0 - spsi)
+        b[j] = 0.5 * (1.0 + spsi)
+        f = 0.5 * (sig[j] - sig[i]) + 0.5 * (sig[i] + sig[j]) * sphi - c * cphi
+        dfdk = (0.5 * (sig[i] + sig[j]) * cphi + c * sphi) * dphi - cphi * dc
+        return f, dfdk
+    k = _TCUT[pid - 3]
+    a[k] = 1.0
+    b[k] = 1.0
+    return sig[k] - st, 0.0
+
+
+@numba.njit(cache=True)
+def _solve_small(J, r, m, x, M):
+    """x = J[:m,:m]^-1 r[:m] by Gaussian elimination with partial pivoting (M: 3 x 4 work
+    array); False if singular."""
+    for i in range(m):
+        for j in range(m):
+            M[i, j] = J[i, j]
+        M[i, m] = r[i]
+    scale = 0.0
+    for i in range(m):
+        for j in range(m):
+            scale = max(scale, abs(J[i, j]))
+    for col in range(m):
+        piv = col
+        for i in range(col + 1, m):
+            if abs(M[i, col]) > abs(M[piv, col]):
+                piv = i
+        if not abs(M[piv, col]) > 1e-13 * scale:
+            return False
+        if piv != col:
+            for j in range(m + 1):
+                t = M[col, j]
+                M[col, j] = M[piv, j]
+                M[piv, j] = t
+        for i in range(col + 1, m):
+            fct = M[i, col] / M[col, col]
+            for j in range(col, m + 1):
+                M[i, j] -= fct * M[col, j]
+    for i in range(m - 1, -1, -1):
+        s = M[i, m]
+        for j in range(i + 1, m):
+            s -= M[i, j] * x[j]
+        x[i] = s / M[i, i]
+    return True
+
+
+@numba.njit(cache=True)
+def _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl, Amat, Bmat, J, W, M):
+    """Return onto active set _SETS[sid]: fills sig, dl, the active gradients (Amat columns),
+    flow directions (Bmat columns) and the Jacobian J; returns (m, kappa) or m = -1 on failure.
+    W (>= 7 x 3) and M (3 x 4) are work arrays."""
+    m = 0
+    for q in range(3):
+        if _SETS[sid, q] >= 0:
+            m += 1
+    a, b, r, dfdk, ep, dkdl, step = W[0], W[1], W[2], W[3], W[4], W[5], W[6]
+    for q in range(3):
+        dl[q] = 0.0
+    for q in range(m):                      # flow directions (independent of kappa)
+        _plane(_SETS[sid, q], s_tr, 0.0, 1.0, 0.0, 0.0, 0.0, spsi, st, a, b)
+        for i in range(3):
+            Bmat[i, q] = b[i]
+    kappa = kap_n
+    for it in range(60):
+        for i in range(3):
+            ep[i] = 0.0
+            for q in range(m):
+                ep[i] += dl[q] * Bmat[i, q]
+        em = (ep[0] + ep[1] + ep[2]) / 3.0
+        nd = math.sqrt((ep[0] - em) ** 2 + (ep[1] - em) ** 2 + (ep[2] - em) ** 2)
+        kappa = kap_n + _SQ23 * nd
+        phi, dphi = _soft(par[0], par[1], par[4], kappa)
+        c, dc = _soft(par[2], par[3], par[4], kappa)
+        sphi = math.sin(phi)
+        cphi = math.cos(phi)
+        tr = ep[0] + ep[1] + ep[2]
+        for i in range(3):
+            sig[i] = s_tr[i] - lam * tr - 2.0 * mu * ep[i]
+        res = 0.0
+        for q in range(m):
+            f, dfdk[q] = _plane(_SETS[sid, q], sig, sphi, cphi, c, dphi, dc, spsi, st, a, b)
+            r[q] = f
+            res = max(res, abs(f))
+            for i in range(3):
+                Amat[i, q] = a[i]
+        for q in range(m):
+            if nd > 1e-300:
+                s = 0.0
+                for i in range(3):
+                    s += (ep[i] - em) * Bmat[i, q]
+                dkdl[q] = _SQ23 * s / nd
+            else:
+                dkdl[q] = 0.0
+        for q in range(m):
+            for w in range(m):
+                trb = Bmat[0, w] + Bmat[1, w] + Bmat[2, w]
+                adb = 0.0
+                for i in range(3):
+                    adb += Amat[i, q] * (lam * trb + 2.0 * mu * Bmat[i, w])
+                J[q, w] = -adb + dfdk[q] * dkdl[w]
+        if res <= 1e-13 * scale and it > 0:
+            return m, kappa
+        if not _solve_small(J, r, m, step, M):
+            return -1, kappa
+        for q in range(m):
+            dl[q] -= step[q]
+    return -1, kappa
+
+
+@numba.njit(cache=True)
+def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
+    """Principal-space return of s_tr (ascending) from history kap_n; writes sig and
+    A = d sig / d s_tr (3 x 3); returns (plastic, d eps_d^p, d eps_v^p).
+    W (22 x 3) and M (3 x 4) are work arrays."""
+    phi, dphi = _soft(par[0], par[1], par[4], kap_n)
+    c, dc = _soft(par[2], par[3], par[4], kap_n)
+    sphi = math.sin(phi)
+    cphi = math.cos(phi)
+    a, b = W[7], W[8]
+    f0, _ = _plane(0, s_tr, sphi, cphi, c, dphi, dc, spsi, st, a, b)
+    for i in range(3):
+        for j in range(3):
+            A[i, j] = 1.0 if i == j else 0.0
+        sig[i] = s_tr[i]
+    scale = max(abs(s_tr[0]), abs(s_tr[2]), c, 1e-300)
+    if f0 <= 0.0 and s_tr[2] <= st:
+        return False, 0.0, 0.0
+    dl, X, col, ep = W[9], W[10], W[11], W[12]
+    Amat, Bmat, J = W[13:16], W[16:19], W[19:22]
+    tol = 1e-10 * scale
+    for sid in range(_SETS.shape[0]):
+        m, kappa = _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl,
+                              Amat, Bmat, J, W, M)
+        if m < 0:
+            continue
+        dlmax = 0.0
+        for q in range(m):
+            dlmax = max(dlmax, abs(dl[q]))
+        ok = sig[0] <= sig[1] + tol and sig[1] <= sig[2] + tol and sig[2] <= st + tol
+        for q in range(m):
+            ok = ok and dl[q] >= -1e-10 * dlmax
+        if not ok:
+            continue
+        phi, dphi = _soft(par[0], par[1], par[4], kappa)
+        c, dc = _soft(par[2], par[3], par[4], kappa)
+        fm, _ = _plane(0, sig, math.sin(phi), math.cos(phi), c, dphi, dc, spsi, st, a, b)
+        if fm > tol:
+            continue
+        # A = I + D B J^-1 A^T
+        for j in range(3):
+            for q in range(m):
+                col[q] = Amat[j, q]
+            _solve_small(J, col, m, X, M)       # X = J^-1 A^T e_j
+            for i in range(3):
+                ep[i] = 0.0
+            for q in range(m):
+                for i in range(3):
+                    ep[i] += Bmat[i, q] * X[q]
+            tr = ep[0] + ep[1] + ep[2]
+            for i in range(3):
+                A[i, j] += lam * tr + 2.0 * mu * ep[i]
+        epv = 0.0
+        for q in range(m):
+            epv += dl[q] * (Bmat[0, q] + Bmat[1, q] + Bmat[2, q])
+        return True, kappa - kap_n, epv
+    # apex: sigma_i = c cot(phi), d kappa = sqrt(2/3) |dev s_tr| / (2 mu)
+    pm = (s_tr[0] + s_tr[1] + s_tr[2]) / 3.0
+    nd = math.sqrt((s_tr[0] - pm) ** 2 + (s_tr[1] - pm) ** 2 + (s_tr[2] - pm) ** 2)
+    dk = _SQ23 * nd / (2.0 * mu)
+    kappa = kap_n + dk
+    phi, dphi = _soft(par[0], par[1], par[4], kappa)
+    c, dc = _soft(par[2], par[3], par[4], kappa)
+    sphi = math.sin(phi)
+    pa = c * math.cos(phi) / sphi
+    dpa = dc * math.cos(phi) / sphi - c * dphi / (sphi * sphi)
+    for i in range(3):
+        sig[i] = pa
+        for j in range(3):
+            A[i, j] = dpa * _SQ23 / (2.0 * mu) * (s_tr[j] - pm) / nd if nd > 1e-300 else 0.0
+    return True, dk, 3.0 * (pm - pa) / (3.0 * lam + 2.0 * mu)
+
+
+@numba.njit(cache=True)
+def _trial(p, dF, sigma_old, lam, mu, S):
+    """Jaumann elastic predictor S = sigma_old + omega sigma_old - sigma_old omega + C : eps."""
+    tr = dF[p, 0, 0] + dF[p, 1, 1] + dF[p, 2, 2] - 3.0
+    for i in range(3):
+        for j in range(3):
+            hij = dF[p, i, j] - (1.0 if i == j else 0.0)
+            hji = dF[p, j, i] - (1.0 if i == j else 0.0)
+            v = sigma_old[p, i, j] + mu * (hij + hji) + (lam * tr if i == j else 0.0)
+            for m in range(3):
+                v += (0.5 * (dF[p, i, m] - dF[p, m, i]) * sigma_old[p, m, j]
+                      - sigma_old[p, i, m] * 0.5 * (dF[p, m, j] - dF[p, j, m]))
+            S[i, j] = v
+
+
+@numba.njit(cache=True)
+def _principal_closed_form(S, w):
+    """Ascending eigenvalues of the symmetric S from its invariants (trigonometric form);
+    used only to skip the eigen-decomposition of clearly elastic states."""
+    pm = (S[0, 0] + S[1, 1] + S[2, 2]) / 3.0
+    b00, b11, b22 = S[0, 0] - pm, S[1, 1] - pm, S[2, 2] - pm
+    q2 = (b00 * b00 + b11 * b11 + b22 * b22
+          + 2.0 * (S[0, 1] ** 2 + S[0, 2] ** 2 + S[1, 2] ** 2)) / 6.0
+    if q2 <= 0.0:
+        w[0] = w[1] = w[2] = pm
+        return
+    det = (b00 * (b11 * b22 - S[1, 2] * S[2, 1]) - S[0, 1] * (S[1, 0] * b22 - S[1, 2] * S[2, 0])
+           + S[0, 2] * (S[1, 0] * S[2, 1] - b11 * S[2, 0]))
+    r = min(1.0, max(-1.0, 0.5 * det / q2 ** 1.5))
+    ang = math.acos(r) / 3.0
+    sq = 2.0 * math.sqrt(q2)
+    w[2] = pm + sq * math.cos(ang)
+    w[0] = pm + sq * math.cos(ang + 2.0 * math.pi / 3.0)
+    w[1] = 3.0 * pm - w[0] - w[2]
+
+
+@numba.njit(cache=True)
+def _clearly_elastic(S, kap_n, par, st, w):
+    """True if S lies inside the yield surfaces by more than 1e-6 of its size."""
+    _principal_closed_form(S, w)
+    phi, _ = _soft(par[0], par[1], par[4], kap_n)
+    c, _ = _soft(par[2], par[3], par[4], kap_n)
+    sphi = math.sin(phi)
+    f = 0.5 * (w[2] - w[0]) + 0.5 * (w[0] + w[2]) * sphi - c * math.cos(phi)
+    tol = 1e-6 * max(abs(w[0]), abs(w[2]), c)
+    return f < -tol and w[2] < st - tol
+
+
+@numba.njit(cache=True)
+def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st):
+    """sigma_new = principal return of the Jaumann predictor; state[:, 0:2] += (d eps_d^p,
+    d eps_v^p).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians."""
+    S = np.empty((3, 3))
+    sig = np.empty(3)
+    A = np.empty((3, 3))
+    W = np.empty((22, 3))
+    M = np.empty((3, 4))
+    w0 = np.empty(3)
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        _trial(p, dF, sigma_old, lam, mu, S)
+        if _clearly_elastic(S, state[p, 0], par, st, w0):
+            for i in range(3):
+                for j in range(3):
+                    sigma_new[p, i, j] = S[i, j]
+            continue
+        w, V = np.linalg.eigh(S)
+        plastic, dk, dv = _mc_return(w, state[p, 0], lam, mu, par, spsi, st, sig, A, W, M)
+        if not plastic:
+            for i in range(3):
+                for j in range(3):
+                    sigma_new[p, i, j] = S[i, j]
+            continue
+        for i in range(3):
+            for j in range(3):
+                sigma_new[p, i, j] = (V[i, 0] * sig[0] * V[j, 0] + V[i, 1] * sig[1] * V[j, 1]
+                                      + V[i, 2] * sig[2] * V[j, 2])
+        state[p, 0] += dk
+        state[p, 1] += dv
+
+
+@numba.njit(cache=True)
+def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st):
+    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state."""
+    S = np.empty((3, 3))
+    sig = np.empty(3)
+    A = np.empty((3, 3))
+    X = np.empty((3, 3))
+    Y = np.empty((3, 3))
+    th = np.empty((3, 3))
+    E = np.empty((3, 3))
+    W = np.empty((22, 3))
+    M = np.empty((3, 4))
+    w0 = np.empty(3)
+    V = np.eye(3)
+    for q in range(idx.shape[0]):
+        p = idx[q]
+        _trial(p, dF, sigma_old, lam, mu, S)
+        elastic = _clearly_elastic(S, state[p, 0], par, st, w0)
+        if not elastic:
+            w, V = np.linalg.eigh(S)
+            _mc_return(w, state[p, 0], lam, mu, par, spsi, st, sig, A, W, M)
+            scale = max(abs(w[0]), abs(w[2]), 1e-300)
+            for i in range(3):
+                for j in range(3):
+                    if i != j:
+                        if abs(w[i] - w[j]) > 1e-10 * scale:
+                            th[i, j] = (sig[i] - sig[j]) / (w[i] - w[j])
+                        else:
+                            th[i, j] = A[i, i] - A[i, j]
+        for k in range(3):
+            for l in range(3):
+                # E = d sigma_tr / d dF_kl (Jaumann predictor, see LinearElastic)
+                for i in range(3):
+                    for j in range(3):
+                        v = 0.0
+                        if i == j and k == l:
+                            v += lam
+                        if i == k and j == l:
+                            v += mu
+                        if i == l and j == k:
+                            v += mu
+                        if i == k:
+                            v += 0.5 * sigma_old[p, l, j]
+                        if i == l:
+                            v -= 0.5 * sigma_old[p, k, j]
+                        if j == l:
+                            v -= 0.5 * sigma_old[p, i, k]
+                        if j == k:
+                            v += 0.5 * sigma_old[p, i, l]
+                        E[i, j] = v
+                if elastic:
+                    for i in range(3):
+                        for j in range(3):
+                            dsig[p, i, j, k, l] = E[i, j]
+                    continue
+                for a in range(3):
+                    for b in range(3):
+                        s = 0.0
+                        for i in range(3):
+                            for j in range(3):
+                                s += V[i, a] * E[i, j] * V[j, b]
+                        X[a, b] = s
+                for a in range(3):
+                    for b in range(3):
+                        if a == b:
+                            Y[a, a] = A[a, 0] * X[0, 0] + A[a, 1] * X[1, 1] + A[a, 2] * X[2, 2]
+                        else:
+                            Y[a, b] = th[a, b] * X[a, b]
+                for i in range(3):
+                    for j in range(3):
+                        s = 0.0
+                        for a in range(3):
+                            for b in range(3):
+                                s += V[i, a] * Y[a, b] * V[j, b]
+                        dsig[p, i, j, k, l] = s
+
+
+def _check_range(owner, name, value, lo, hi, hi_open=False, what=""):
+    v = check_real(owner, name, value)
+    if v < lo or v > hi or (hi_open and v == hi):
+        rel = "<" if hi_open else "<="
+        raise ValueError(f"{owner}: parameter '{name}' must satisfy {lo} <= {name} {rel} {hi}"
+                         f"{what}, got {v!r}")
+    return v
+
+
+class MohrCoulomb(IsotropicElasticParameters):
+    """Non-associated Mohr-Coulomb soil with tension cut-off and exponential softening.
+
+    f = 1/2 (sigma_3 - sigma_1) + 1/2 (sigma_1 + sigma_3) sin(phi) - c cos(phi)  (seed 002 eq 5.1),
+    g as f with psi, no cohesion (eq 5.4), principal return after Clausen et al. (2006);
+    phi, c = x_res + (x_peak - x_res) exp(-eta eps_d^p) (seed 003).  See the module docstring.
+
+    Parameters (angles in degrees, stresses in Pa, tension positive):
+        E > 0, -1 < nu < 0.5, density > 0;
+        0 <= phi < 90, c >= 0 (phi > 0 or c > 0);
+        0 <= psi <= phi_res;  tension_cutoff: None (none) or sigma_t >= 0 on sigma_3;
+        phi_res in [0, phi] (default phi), c_res in [0, c] (default c), phi_res > 0 or c_res > 0;
+        eta >= 0 (softening rate; 0 = perfectly plastic).
+    History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p.
+    """
+
+    name = "MohrCoulomb"
+    n_state = 2
+
+    def __init__(self, E, nu, density, phi, c, psi=0.0, tension_cutoff=None, phi_res=None,
+                 c_res=None, eta=0.0):
+        owner = type(self).__name__
+        self._set_parameters(E, nu, density)
+        self._phi = _check_range(owner, "phi", phi, 0.0, 90.0, hi_open=True, what=" degrees")
+        self._c = check_real(owner, "c", c)
+        if self._c < 0.0:
+            raise ValueError(f"{owner}: parameter 'c' must be >= 0, got {self._c!r}")
+        if self._phi == 0.0 and self._c == 0.0:
+            raise ValueError(f"{owner}: parameter 'c' must be > 0 when phi = 0 (no strength), "
+                             f"got {self._c!r}")
+        self._phi_res = self._phi if phi_res is None else _check_range(
+            owner, "phi_res", phi_res, 0.0, self._phi, what=" (residual <= peak phi)")
+        self._c_res = self._c if c_res is None else _check_range(
+            owner, "c_res", c_res, 0.0, self._c, what=" (residual <= peak c)")
+        if self._phi_res == 0.0 and self._c_res == 0.0:
+            raise ValueError(f"{owner}: parameter 'c_res' must be > 0 when phi_res = 0 "
+                             f"(no residual strength), got {self._c_res!r}")
+        self._psi = _check_range(owner, "psi", psi, 0.0, self._phi_res,
+                                 what=" (0 <= psi <= phi_res <= phi)")
+        self._eta = check_real(owner, "eta", eta)
+        if self._eta < 0.0:
+            raise ValueError(f"{owner}: parameter 'eta' must be >= 0, got {self._eta!r}")
+        if tension_cutoff is None:
+            self._st = None
+        else:
+            self._st = check_real(owner, "tension_cutoff", tension_cutoff)
+            if self._st < 0.0:
+                raise ValueError(f"{owner}: parameter 'tension_cutoff' must be >= 0 "
+                                 f"(tension positive), got {self._st!r}")
+
+    phi = property(lambda self: self._phi, doc="Peak friction angle (degrees).")
+    c = property(lambda self: self._c, doc="Peak cohesion.")
+    psi = property(lambda self: self._psi, doc="Dilatancy angle (degrees).")
+    phi_res = property(lambda self: self._phi_res, doc="Residual friction angle (degrees).")
+    c_res = property(lambda self: self._c_res, doc="Residual cohesion.")
+    eta = property(lambda self: self._eta, doc="Softening rate of exp(-eta eps_d^p).")
+    tension_cutoff = property(lambda self: self._st, doc="Tension cut-off on sigma_3 (or None).")
+
+    def strength(self, eps_d):
+        """(phi [deg], c) at accumulated plastic deviatoric strain eps_d (seed 003)."""
+        e = np.exp(-self._eta * np.asarray(eps_d, dtype=float))
+        return (self._phi_res + (self._phi - self._phi_res) * e,
+                self._c_res + (self._c - self._c_res) * e)
+
+    def _kernel_args(self):
+        par = np.array([math.radians(self._phi), math.radians(self._phi_res), self._c,
+                        self._c_res, self._eta])
+        st = math.inf if self._st is None else self._st
+        return self.lame_lambda, self.shear_modulus, par, math.sin(math.radians(self._psi)), st
+
+    def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
+        """Write sigma_new[idx] and the trial history state[idx]; ``F_old`` is unused."""
+        mohr_coulomb_stress_kernel(np.asarray(idx, dtype=np.int64), dF, sigma_old, sigma_new,
+                                   state, *self._kernel_args())
+
+    def tangent(self, idx, dF, F_old, sigma_old, sigma_new, state, dsig):
+        """Write dsig[idx] = d sigma_new / d dF, the consistent tangent of `stress` from the
+        committed history ``state``."""
+        mohr_coulomb_tangent_kernel(np.asarray(idx, dtype=np.int64), dF, sigma_old, state,
+                                    dsig, *self._kernel_args())
+
+    def reduced(self, factor):
+        """Strength reduction (issue 7): a new MohrCoulomb with tan(phi)/factor and c/factor,
+        likewise for the residual values and the tension cut-off; psi is capped at the reduced
+        residual friction angle."""
+        F = check_real(type(self).__name__, "factor", factor)
+        if not F > 0.0:
+            raise ValueError(f"{type(self).__name__}: parameter 'factor' must be > 0, got {F!r}")
+
+        def red(angle):
+            return math.degrees(math.atan(math.tan(math.radians(angle)) / F))
+
+        phi_res = red(self._phi_res)
+        return MohrCoulomb(self.E, self.nu, self.density, red(self._phi), self._c / F,
+                           psi=min(self._psi, phi_res),
+                           tension_cutoff=None if self._st is None else self._st / F,
+                           phi_res=min(phi_res, red(self._phi)), c_res=self._c_res / F,
+                           eta=self._eta)
+
+    def __repr__(self):
+        return (f"MohrCoulomb(E={self.E!r}, nu={self.nu!r}, density={self.density!r}, "
+                f"phi={self._phi!r}, c={self._c!r}, psi={self._psi!r}, "
+                f"tension_cutoff={self._st!r}, phi_res={self._phi_res!r}, "
+                f"c_res={self._c_res!r}, eta={self._eta!r})")
