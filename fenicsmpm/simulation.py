@@ -25,6 +25,14 @@ PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress":
                 "acceleration": "a"}
 
 
+def _check_ramp(T, owner):
+    if T is None:
+        return None
+    if not (isinstance(T, (int, float, np.floating)) and math.isfinite(T) and T > 0):
+        raise ValueError(f"{owner}: 'gravity_ramp' must be a time > 0 or None, got {T!r}")
+    return float(T)
+
+
 class Simulation:
     """An MPM simulation of `particles` on `grid`, advanced by `integrator`.
 
@@ -37,6 +45,8 @@ class Simulation:
     reported as a warning).
     max_dt_cuts: implicit runs only: when Newton or the KSP fails, retry the step as two
     half steps, at most this many halvings deep (each retry is logged as a warning).
+    gravity_ramp: None, or a time T: gravity grows smoothly over the first T/2 of the stage,
+    g(t) = g [sin(2 pi t / T - pi / 2) + 1] / 2 (seed 002 eq 4.13), then stays at g.
     stress_feedback: None, or "smoothed": explicit runs compute the internal force from the
     grid-smoothed stress (fenicsmpm.smoothing, seed 002 eqs 4.18-4.19) instead of the
     particle stress; the constitutive update still acts on the particle stress.
@@ -48,7 +58,7 @@ class Simulation:
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
                  mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm",
-                 stress_feedback=None):
+                 stress_feedback=None, gravity_ramp=None):
         self.grid = grid
         self.particles = particles
         if not all(hasattr(integrator, a) for a in ("explicit", "setup", "step")):
@@ -99,6 +109,7 @@ class Simulation:
         if stress_feedback is not None and not integrator.explicit:
             raise NotImplementedError("Simulation: stress_feedback='smoothed' needs an explicit integrator")
         self.stress_feedback = stress_feedback
+        self.gravity_ramp = _check_ramp(gravity_ramp, "Simulation")
         self.removed_mass = 0.0
         self.removed_count = 0
         self._work = None                            # local [external, boundary] work (monitor)
@@ -193,7 +204,7 @@ class Simulation:
         self.fixed &= ~mask
 
     def start_stage(self, integrator=None, dt=None, gravity=None, initial_stress=True,
-                    reset_displacement=True):
+                    reset_displacement=True, gravity_ramp=None):
         """Begin a new stage on this simulation (seed 000 §3.5), e.g. after a static gravity
         stage: `sim.start_stage(fm.Newmark(), dt=5e-3, gravity=(0, 0))` then swap boundaries
         with `release` and `add_boundary`.
@@ -202,7 +213,8 @@ class Simulation:
           comes from sigma_dyn = sigma - sigma_ini while materials see the total stress, so
           removing gravity together with sigma_ini leaves the body in equilibrium.
         reset_displacement: measure particle displacements (and Robin spring displacements)
-          from the start of the stage."""
+          from the start of the stage.
+        gravity_ramp: ramp time T of this stage's gravity (see Simulation), None: no ramp."""
         p = self.particles
         if integrator is not None:
             if self.frictions and not integrator.explicit:
@@ -219,6 +231,7 @@ class Simulation:
                 raise ValueError(f"start_stage: 'gravity' must be a finite vector of length "
                                  f"{self.gdim}, got {gravity!r}")
             self.gravity = g
+        self.gravity_ramp = _check_ramp(gravity_ramp, "start_stage")
         self.initial_stress = bool(initial_stress)
         if initial_stress:
             p.add_field("stress_initial", (3, 3))[:] = p.stress
@@ -404,6 +417,10 @@ class Simulation:
         (m: the summed nodal mass) plus the traction forms at time t. With `active`, warns
         (once) when traction lands on nodes without mass: the mesh facets no longer touch
         the material there and that part of the load is lost."""
+        if self.gravity_ramp is not None:
+            tau = (t - self.stage_start) / self.gravity_ramp
+            if tau < 0.5:
+                gravity_scale *= 0.5 * (math.sin(2 * math.pi * tau - 0.5 * math.pi) + 1.0)
         f = m[:, None] * (gravity_scale * self.gravity)
         if self.tractions:
             if self._traction_forms is None:

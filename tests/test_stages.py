@@ -72,3 +72,22 @@ def test_dashpot_base_creeps_under_gravity_spring_dashpot_does_not():
     # viscous: sinks at about rho g H / (rho c_p) = g H / c_p = 0.14 m/s
     assert 0.5 < rates["viscous"] / (10.0 * 10.0 / np.sqrt(1e9 / 2000.0)) < 1.5, rates
     assert rates["viscous"] > 100 * rates["viscoelastic"], rates
+
+
+def test_gravity_ramp_follows_seed_002_eq_4_13():
+    """L1 ramp: g(t) = g [sin(2 pi t / T - pi/2) + 1] / 2 up to T/2, then g: the nodal gravity
+    force at a few times equals m_i times that (relative 1e-14)."""
+    import math
+    from fenicsmpm.verification import vibrating_bar
+    sim, _ = vibrating_bar(fm.Explicit(), n_cells=4)
+    sim = fm.Simulation(sim.grid, sim.particles, fm.Explicit(), dt=sim.dt, gravity=(0.0, -10.0),
+                        gravity_ramp=20.0)
+    sim.locate_and_shape()
+    m = sim.nodal_mass()
+    sim.grid.accumulate(m)
+    for t in (0.0, 2.5, 5.0, 9.9, 10.0, 30.0):
+        f = sim.external_force(t, m)
+        g = 10.0 * (0.5 * (math.sin(2 * math.pi * t / 20.0 - 0.5 * math.pi) + 1) if t < 10 else 1.0)
+        assert np.allclose(f[:, 1], -g * m, rtol=1e-14, atol=1e-300), t
+    with pytest.raises(ValueError, match="'gravity_ramp' must be a time > 0"):
+        sim.start_stage(gravity_ramp=-1.0)
