@@ -1,5 +1,7 @@
-"""Time integrators: explicit (USF/USL/MUSL), Newmark and quasi-static (Newton + PETSc KSP)."""
+"""Time integrators: explicit (USF/USL/MUSL), explicit and implicit generalized-alpha, Newmark
+and quasi-static (Newton + PETSc KSP)."""
 from .explicit import Explicit
 from .implicit import Newmark, QuasiStatic
+from .generalized_alpha import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
 
-__all__ = ["Explicit", "Newmark", "QuasiStatic"]
+__all__ = ["Explicit", "Newmark", "QuasiStatic", "ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]

@@ -8,6 +8,12 @@ Newmark (beta, gamma) with lumped mass (seed 000 eqs 2.30-2.32, errata: 1/(beta 
   a^{n+1} = (du - dt v^n - dt^2 (1/2 - beta) a^n) / (beta dt^2),
   v^{n+1} = v^n + dt ((1 - gamma) a^n + gamma a^{n+1}),
   R = f_ext(t^{n+1}) - f_int(du) - M a^{n+1},   J = K + M / (beta dt^2).
+Generalized-alpha (Chung & Hulbert 1993, BENCHMARKS P; generalized_alpha.py) weights the
+inertia at n+1-alpha_m and the forces at n+1-alpha_f; its residual, divided by 1 - alpha_f,
+  R = f(t^{n+1}; du) + alpha_f / (1 - alpha_f) f(t^n) - M ((1 - alpha_m) a^{n+1} + alpha_m a^n) / (1 - alpha_f),
+  J = K + (1 - alpha_m) / (1 - alpha_f) M / (beta dt^2),
+with f = f_ext - f_int (+ Robin, particle layers) and f(t^n) from the committed state;
+alpha_m = alpha_f = 0 is Newmark.
 Particle velocities and accelerations are updated FLIP-style from the nodal changes (a PIC
 projection of the acceleration loses about 1 % of the energy per 5 periods of the V1 bar at
 5x the critical step; FLIP about 0.1 %). Quasi-static drops the inertia terms and ramps gravity over `load_steps` steps.
@@ -145,7 +151,10 @@ class _Newton:
 
 
 class Newmark(_Newton):
-    """Implicit Newmark (default beta = 1/4, gamma = 1/2: trapezoidal, unconditionally stable)."""
+    """Implicit Newmark (default beta = 1/4, gamma = 1/2: trapezoidal, unconditionally stable).
+    alpha_m = alpha_f = 0 here; ImplicitGeneralizedAlpha sets them (module docstring)."""
+
+    alpha_m = alpha_f = 0.0
 
     def __init__(self, beta=0.25, gamma=0.5, **kw):
         super().__init__(**kw)
@@ -171,6 +180,10 @@ class Newmark(_Newton):
         v0[sim.fixed] = 0.0
         a0[sim.fixed] = 0.0
         sim.nodal = dict(mass=m, active=active)
+        am, af = self.alpha_m, self.alpha_f
+        if af:
+            f_ext = f_ext + af / (1.0 - af) * self._start_force(sim, m, active, v0)
+        wm = (1.0 - am) / (1.0 - af)
 
         def accel(du):
             a1 = (du - dt * v0 - dt * dt * (0.5 - b) * a0) / (b * dt * dt)
@@ -181,7 +194,8 @@ class Newmark(_Newton):
             return v0 + dt * ((1 - g) * a0 + g * accel(du))
 
         # predictor: constant acceleration (a^{n+1} = a^n, v^{n+1} = v^n + dt a^n)
-        du = self.solve_step(sim, dt, f_ext, 1.0 / (b * dt * dt), lambda du: m[:, None] * accel(du),
+        du = self.solve_step(sim, dt, f_ext, wm / (b * dt * dt),
+                             lambda du: m[:, None] * (wm * accel(du) + am / (1.0 - af) * a0),
                              velocity, g / (b * dt), v0, du0=dt * v0 + 0.5 * dt * dt * a0,
                              force_scale=self._norm(sim, m[:, None] * v0) / dt
                              + self._norm(sim, m[:, None] * a0))
@@ -196,6 +210,19 @@ class Newmark(_Newton):
         sim.timers["g2p"] += time.perf_counter() - t0
         sim.commit(sim._dF)
         sim.nodal["velocity"] = v1
+
+    def _start_force(self, sim, m, active, v0):
+        """f(t^n) = f_ext(t^n) - f_int(sigma^n) + Robin and particle-layer forces of the
+        start-of-step state (summed over ranks)."""
+        p = sim.particles
+        f = np.zeros((sim.grid.n_nodes, sim.gdim))
+        sim.internal_force(sim.dynamic_stress(p.stress), f)
+        if sim.robin is not None:
+            sim.robin.force(sim.robin_u, v0, f)
+        if sim.layers:
+            sim.layer_force(p.u - p.layer_u0, p.v, f)
+        sim.grid.accumulate(f)
+        return f + sim.external_force(sim.t, m, active=active)
 
 
 class QuasiStatic(_Newton):
