@@ -185,6 +185,25 @@ class Grid:
                         self.affine_Jinv, cells, xi)
         return cells, xi
 
+    def has_vertex_ring(self):
+        """Whether every cell touching a vertex of an owned cell is local (collective).
+
+        Always true in serial; in parallel it holds for meshes created with
+        partitioner=vertex_ghost_partitioner(), not with dolfinx's shared_facet ghosts
+        (diagonal neighbours are missing). Shape functions wider than one cell (GIMP, CPDI) need it. Compares, per
+        node, the local count of cells containing it with the global count."""
+        if self.comm.size == 1:
+            return True
+        from mpi4py import MPI
+        owned = np.zeros(self.n_nodes)
+        np.add.at(owned, self.cell_nodes[: self.n_owned_cells].ravel(), 1.0)
+        self.accumulate(owned)
+        local = np.zeros(self.n_nodes)
+        np.add.at(local, self.cell_nodes.ravel(), 1.0)
+        need = np.unique(self.cell_nodes[: self.n_owned_cells])
+        ok = bool(np.all(local[need] == owned[need]))
+        return self.comm.allreduce(ok, op=MPI.LAND)
+
     # ------------------------------------------------------------------ nodes
     def nodes_where(self, where):
         """Boolean mask over local nodes for a locator where(x) -> bool, x of shape (n, gdim)."""
@@ -216,3 +235,39 @@ class Grid:
             vec.scatter_reverse(ScatterMode.add)
             vec.scatter_forward()
             arr[...] = vec.array.reshape(arr.shape)
+
+
+def vertex_ghost_partitioner(partitioner=None):
+    """A dolfinx cell partitioner whose ghost layer holds every cell sharing a vertex with a
+    rank's owned cells: what GhostMode.shared_vertex would give (dolfinx 0.5 disables that
+    mode). GIMP and CPDI shape functions need it in parallel, e.g.
+        create_rectangle(comm, pts, n, CellType.quadrilateral,
+                         partitioner=fenicsmpm.grid.vertex_ghost_partitioner())
+    `partitioner` (default dolfinx's create_cell_partitioner()) chooses the owners; each
+    rank's input cells are gathered on every rank to find the vertex neighbours."""
+    from dolfinx import graph
+    from dolfinx.cpp.mesh import create_cell_partitioner
+    base = create_cell_partitioner() if partitioner is None else partitioner
+
+    def partition(comm, nparts, tdim, cells, ghost_mode):
+        dest = base(comm, nparts, tdim, cells, ghost_mode)
+        n = len(cells.offsets) - 1
+        owner = np.asarray(dest.array)[np.asarray(dest.offsets)[:-1]].astype(np.int64)
+        k = int(cells.offsets[1] - cells.offsets[0]) if n else 0
+        arr = np.asarray(cells.array, dtype=np.int64).reshape(n, k) if n else np.zeros((0, 0), np.int64)
+        parts = comm.allgather((arr, owner))
+        verts = np.concatenate([a.ravel() for a, _ in parts])
+        owners = np.concatenate([np.repeat(o, a.shape[1]) for a, o in parts])
+        pairs = np.unique(np.stack([verts, owners], axis=1), axis=0)   # (vertex, owning rank)
+        start = np.searchsorted(pairs[:, 0], arr.ravel(), side="left").reshape(arr.shape)
+        stop = np.searchsorted(pairs[:, 0], arr.ravel(), side="right").reshape(arr.shape)
+        dests, offsets = [], [0]
+        for c in range(n):
+            ranks = {int(r) for a, b in zip(start[c], stop[c]) for r in pairs[a:b, 1]}
+            ranks.discard(int(owner[c]))
+            row = [int(owner[c])] + sorted(ranks)
+            dests += row
+            offsets.append(len(dests))
+        return graph.create_adjacencylist(np.array(dests, dtype=np.int32),
+                                          np.array(offsets, dtype=np.int32))
+    return partition

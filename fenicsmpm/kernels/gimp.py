@@ -1,0 +1,243 @@
+"""GIMP shape functions (uGIMP and cpGIMP) on structured quadrilateral/hexahedral grids.
+
+A particle p of half-widths l_p,k (one per axis) is a box; its weight at node i is the
+average of the node's hat function N_i over the box, and its gradient the average of grad N_i
+(Bardenhagen & Kober 2004):
+    S_ip = (1/V_p) int_{Omega_p} N_i dx,      grad S_ip = (1/V_p) int_{Omega_p} grad N_i dx.
+On a lattice of spacing L_k both are tensor products of 1D factors. With Phi the
+antiderivative of the 1D hat N(s) = max(0, 1 - |s|/L), and the box [a, b] = [x_p - l_p, x_p + l_p]
+along one axis,
+    S(xi) = (Phi(b - x_i) - Phi(a - x_i)) / (b - a),  dS = (N(b - x_i) - N(a - x_i)) / (b - a),
+which for l_p <= L/2 is exactly the piecewise weight of seeds 000 eq 2.48 / 002 eq 3.14 as
+corrected in BENCHMARKS.md ("GIMP weight"), with xi = x_p - x_i:
+    (L + l_p + xi)^2 / (4 L l_p)         -L - l_p < xi <= -L + l_p
+    1 + xi / L                           -L + l_p < xi <= -l_p
+    1 - (xi^2 + l_p^2) / (2 L l_p)        |xi| <= l_p
+    1 - xi / L                            l_p < xi <= L - l_p
+    (L + l_p - xi)^2 / (4 L l_p)          L - l_p < xi <= L + l_p,   0 beyond,
+and stays valid for l_p > L/2 (stretched cpGIMP particles). Where a box pokes out of the
+grid it is cut at the grid boundary ([a, b] clipped to the grid's extent), so the weights
+still sum to 1 and the gradients to 0.
+
+uGIMP keeps l_p = l_p^0; cpGIMP (contiguous particle GIMP, Wallstedt & Guilkey 2008) uses
+l_p,k = l_p,k^0 |F_kk| (the box follows the stretch along each axis).
+"""
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True)
+def _phi(s, L):
+    """Antiderivative of the hat max(0, 1 - |s|/L), zero at s = -L."""
+    if s <= -L:
+        return 0.0
+    if s <= 0.0:
+        return (L + s) * (L + s) / (2.0 * L)
+    if s <= L:
+        return L - (L - s) * (L - s) / (2.0 * L)
+    return L
+
+
+@njit(cache=True)
+def _hat(s, L):
+    return max(0.0, 1.0 - abs(s) / L)
+
+
+@njit(cache=True)
+def weight_1d(xp, lp, xi_node, L, lo, hi):
+    """1D GIMP weight and gradient of the node at xi_node for the box [xp - lp, xp + lp]
+    clipped to [lo, hi] (see the module docstring). A box that overlaps the node's support
+    by less than 1e-12 L gets exactly 0 (its weight, below 1e-24, is round-off of a box that
+    ends on the support's edge)."""
+    a = max(xp - lp, lo)
+    b = min(xp + lp, hi)
+    if b - xi_node <= -L * (1.0 - 1e-12) or a - xi_node >= L * (1.0 - 1e-12):
+        return 0.0, 0.0
+    w = b - a
+    S = (_phi(b - xi_node, L) - _phi(a - xi_node, L)) / w
+    dS = (_hat(b - xi_node, L) - _hat(a - xi_node, L)) / w
+    return S, dS
+
+
+@njit(cache=True)
+def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns,
+               nodes_out, N_out, dN_out, count_out):
+    """GIMP weights of every particle on the lattice nodes its box overlaps.
+
+    x (n, d) positions; lp0 (n, d) initial half-widths; F (n, 3, 3): with `contiguous` the
+    half-widths are lp0_k |F_kk| (cpGIMP), else lp0 (uGIMP). origin/spacing: global lattice
+    origin and cell size per axis; lo/hi: the grid's extent (boxes are clipped to it);
+    table: local node index of lattice point ilo + j (j < nlat, flat, axis 0 fastest), or
+    -1 where the point is not a local node. ns: nodes per axis looked at, ceil(2 l / L) + 2,
+    enough for any box of half-width l.
+    Output per particle: the nonzero-weight nodes first (count_out of them), then padding
+    (a valid node with N = dN = 0). Returns -1, or the index of a particle whose box reaches a
+    node that is not local (the caller raises)."""
+    d = len(D)
+    nv = nodes_out.shape[1]
+    Sk = np.empty((d, ns))
+    dSk = np.empty((d, ns))
+    jk = np.empty((d, ns), dtype=np.int64)
+    idx = np.empty(d, dtype=np.int64)
+    bad = -1
+    for p in range(x.shape[0]):
+        for k in range(d):
+            lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
+            L = spacing[k]
+            j0 = int(np.floor((max(x[p, k] - lp, lo[k]) - origin[k]) / L))
+            for q in range(ns):
+                j = j0 + q
+                jk[k, q] = j
+                S, dS = weight_1d(x[p, k], lp, origin[k] + j * L, L, lo[k], hi[k])
+                Sk[k, q] = S
+                dSk[k, q] = dS
+        cnt = 0
+        pad = -1
+        total = 1
+        for k in range(d):
+            total *= ns
+        for m in range(total):
+            r = m
+            w = 1.0
+            for k in range(d):
+                idx[k] = r % ns
+                r //= ns
+                w *= Sk[k, idx[k]]
+            flat = 0
+            stride = 1
+            node = -1
+            inside = True
+            for k in range(d):
+                jl = jk[k, idx[k]] - ilo[k]
+                if jl < 0 or jl >= nlat[k]:
+                    inside = False
+                flat += jl * stride
+                stride *= nlat[k]
+            if inside:
+                node = table[flat]
+            if w == 0.0:
+                if node >= 0 and pad < 0:
+                    pad = node
+                continue
+            if node < 0:
+                bad = p
+                continue
+            nodes_out[p, cnt] = node
+            N_out[p, cnt] = w
+            for k in range(d):
+                g = dSk[k, idx[k]]
+                for l in range(d):
+                    if l != k:
+                        g *= Sk[l, idx[l]]
+                dN_out[p, cnt, k] = g
+            cnt += 1
+        count_out[p] = cnt
+        if pad < 0 and cnt > 0:
+            pad = nodes_out[p, 0]
+        for a in range(cnt, nv):
+            nodes_out[p, a] = pad
+            N_out[p, a] = 0.0
+            for k in range(d):
+                dN_out[p, a, k] = 0.0
+    return bad
+
+
+def lattice(grid):
+    """Global lattice data of a structured quadrilateral/hexahedral grid for gimp_shape:
+    dict(origin, spacing, lo, hi, ilo, nlat, table). Collective (MPI reductions).
+
+    Raises ValueError if the grid is not a lattice of equal axis-aligned boxes, one cell each."""
+    from mpi4py import MPI
+    from . import shape as ks
+    comm = grid.comm
+    s = grid._structured
+    ok = grid.kind == ks.TENSOR and s is not None and s["table"].shape[1] == 1
+    spacing = s["spacing"] if ok else np.full(grid.gdim, np.nan)
+    if comm.size > 1:
+        ok = comm.allreduce(ok, op=MPI.LAND)
+        if ok:
+            all_sp = comm.allgather(spacing)
+            ok = all(np.allclose(sp, spacing, rtol=1e-9, atol=0.0) for sp in all_sp)
+    if not ok:
+        raise ValueError("GIMP shape functions need a structured grid of equal axis-aligned "
+                         "quadrilaterals/hexahedra (dolfinx create_rectangle/create_box with "
+                         "CellType.quadrilateral/hexahedron)")
+    lo = grid.node_x.min(axis=0)
+    hi = grid.node_x.max(axis=0)
+    if comm.size > 1:
+        lo = np.min(comm.allgather(lo), axis=0)
+        hi = np.max(comm.allgather(hi), axis=0)
+    ij = np.round((grid.node_x - lo) / spacing).astype(np.int64)
+    ilo = ij.min(axis=0)
+    nlat = ij.max(axis=0) - ilo + 1
+    strides = np.cumprod(np.concatenate([[1], nlat[:-1]]))
+    table = np.full(int(np.prod(nlat)), -1, dtype=np.int32)
+    table[(ij - ilo) @ strides] = np.arange(grid.n_nodes, dtype=np.int32)
+    return dict(origin=np.ascontiguousarray(lo), spacing=np.ascontiguousarray(spacing, dtype=float),
+                lo=np.ascontiguousarray(lo), hi=np.ascontiguousarray(hi), ilo=ilo,
+                nlat=nlat, table=table)
+
+
+def initial_half_widths(grid, particles, lat):
+    """l_p^0 per axis from the particle volume: a box of the cell's aspect ratio and volume
+    V0_p, l_k = (L_k / 2) (V0_p / prod L)^(1/d); for Particles.fill with n per direction this
+    is L_k / (2 n), the fill spacing."""
+    L = lat["spacing"]
+    s = (particles.V0 / np.prod(L)) ** (1.0 / grid.gdim)
+    return np.ascontiguousarray(0.5 * s[:, None] * L[None, :])
+
+
+class GimpShape:
+    """uGIMP (contiguous=False) or cpGIMP (contiguous=True) shape functions for a Simulation.
+
+    Adds the particle field `gimp_l0` (n, gdim), the initial half-widths (initial_half_widths,
+    unless the particles already carry it). Collective at construction."""
+
+    def __init__(self, sim, contiguous):
+        grid, p = sim.grid, sim.particles
+        self.lat = lattice(grid)
+        if not grid.has_vertex_ring():
+            raise ValueError(_RING_MESSAGE.format(name="GIMP"))
+        self.contiguous = bool(contiguous)
+        if not hasattr(p, "gimp_l0"):
+            p.add_field("gimp_l0", (grid.gdim,))[:] = initial_half_widths(grid, p, self.lat)
+        self._buf = None
+
+    def before_locate(self, sim):
+        """Nothing to move: the box follows x_p (and F for cpGIMP)."""
+
+    def evaluate(self, sim):
+        """(nodes, N, dN) of the local particles, nv = the largest number of nodes a particle
+        touches (padded)."""
+        p, lat, d = sim.particles, self.lat, sim.gdim
+        n = len(p)
+        if n and self.contiguous:
+            ratio = float(np.max(p.gimp_l0 * np.abs(np.diagonal(p.F, axis1=1, axis2=2)[:, :d])
+                                 / lat["spacing"]))
+        else:
+            ratio = float(np.max(p.gimp_l0 / lat["spacing"])) if n else 0.5
+        ns = int(np.ceil(2.0 * ratio)) + 2
+        width = ns ** d
+        if self._buf is None or self._buf[0].shape != (n, width):
+            self._buf = (np.empty((n, width), dtype=np.int32), np.empty((n, width)),
+                         np.empty((n, width, d)), np.empty(n, dtype=np.int64))
+        nodes, N, dN, count = self._buf
+        bad = gimp_shape(sim.grid.D, p.x, p.gimp_l0, p.F, self.contiguous, lat["origin"],
+                         lat["spacing"], lat["lo"], lat["hi"], lat["ilo"], lat["nlat"],
+                         lat["table"], ns, nodes, N, dN, count)
+        if bad >= 0:
+            raise RuntimeError(f"GIMP: the domain of particle {int(p.id[bad])} at "
+                               f"{np.round(p.x[bad], 6).tolist()} reaches grid nodes that are "
+                               f"not on this rank; " + _RING_MESSAGE.format(name="GIMP"))
+        nv = max(int(count.max()) if n else 1, 1)
+        if nv == width:
+            return nodes, N, dN
+        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
+                np.ascontiguousarray(dN[:, :nv]))
+
+
+_RING_MESSAGE = ("{name} shape functions span neighbouring cells, whose nodes must be local: "
+                 "in parallel, create the mesh with partitioner="
+                 "fenicsmpm.grid.vertex_ghost_partitioner() (the shared-vertex ghost layer; "
+                 "dolfinx 0.5 disables GhostMode.shared_vertex) and keep particle domains no "
+                 "larger than a cell")
