@@ -15,14 +15,15 @@ FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
 
 
 @njit(cache=True)
-def _scan(x, v, stress, F, V, V0, vol_tol, bad_out):
-    """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0),
-    6 (volume below vol_tol V0). Returns the number of bad particles."""
+def _scan(x, v, stress, F, V, V0, inverted, vol_tol, bad_out):
+    """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0, or an
+    increment the commit refused: `inverted`), 6 (volume below vol_tol V0). An inversion is
+    reported first: it is the cause of any non-finite value that follows it."""
     n_bad = 0
     d = x.shape[1]
     for p in range(x.shape[0]):
-        code = 0
-        for k in range(d):
+        code = 5 if p < inverted.shape[0] and inverted[p] == 1 else 0
+        for k in range(d if code == 0 else 0):
             if not np.isfinite(x[p, k]):
                 code = 1
             elif not np.isfinite(v[p, k]):
@@ -35,7 +36,7 @@ def _scan(x, v, stress, F, V, V0, vol_tol, bad_out):
                     elif not np.isfinite(F[p, i, j]):
                         code = 4
         if code == 0:
-            if det3(F[p]) <= 0.0:
+            if not det3(F[p]) > 0.0:
                 code = 5
             elif V[p] < vol_tol * V0[p]:
                 code = 6
@@ -50,16 +51,19 @@ def check_particles(sim, vol_tol=1e-6):
     particles) naming step, time, field and the first offending particles."""
     p = sim.particles
     bad = np.empty(len(p), dtype=np.int8)
-    n_bad = _scan(p.x, p.v, p.stress, p.F, p.V, p.V0, vol_tol, bad)
+    n_bad = _scan(p.x, p.v, p.stress, p.F, p.V, p.V0, sim._inverted, vol_tol, bad)
+    sim._inverted[:] = 0
     if sim.comm.size > 1:
         n_bad = sim.comm.allreduce(n_bad)
     if n_bad == 0:
         return
-    idx = np.flatnonzero(bad)[:5]
-    local = [(int(p.id[i]), tuple(np.round(p.x[i], 6)), int(bad[i])) for i in idx]
+    idx = np.flatnonzero(bad)
+    idx = idx[np.argsort(bad[idx] != 5, kind="stable")][:5]       # inversions first
+    local = [(int(bad[i] != 5), int(p.id[i]), tuple(np.round(p.x[i], 6)), int(bad[i])) for i in idx]
     everyone = sim.comm.allgather(local) if sim.comm.size > 1 else [local]
-    first = sorted(r for part in everyone for r in part)[:5]
+    first = [r[1:] for r in sorted(r for part in everyone for r in part)]
     code = first[0][2]
+    first = [r for r in first if r[2] == code][:5]
     what = (f"non-finite {FIELD_NAMES[code - 1]}" if code <= 4 else
             "inverted particle (det F <= 0)" if code == 5 else
             f"collapsed particle volume (V < {vol_tol:g} V0)")

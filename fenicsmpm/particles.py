@@ -145,6 +145,10 @@ class Particles:
         v = np.zeros((n, grid.gdim))
         if velocity is not None:
             v[:] = velocity(x) if callable(velocity) else np.asarray(velocity, dtype=np.float64)
+            n_bad = grid.global_count(~np.isfinite(v).all(axis=1))     # collective
+            if n_bad:
+                raise ValueError(f"Particles: 'velocity' must be finite, got non-finite values "
+                                 f"at {n_bad} point(s)")
         p = cls(grid, [material], x=x, v=v, mass=material.density * vol, V0=vol, V=vol.copy(),
                 cell=cells, xi=xi)
         p._number()

@@ -76,7 +76,9 @@ class Simulation:
             raise ValueError(f"Simulation: 'cfl' must be in (0, 1], got {cfl!r}")
         self.cfl = cfl
         self.dt = self._check_dt(dt)
-        self.mass_tolerance = mass_tolerance
+        if not (isinstance(mass_tolerance, (int, float, np.floating)) and 0 < mass_tolerance < 1):
+            raise ValueError(f"Simulation: 'mass_tolerance' must be a number in (0, 1), got {mass_tolerance!r}")
+        self.mass_tolerance = float(mass_tolerance)
         self.t = 0.0
         self.step_count = 0
         self.fixed = np.zeros((grid.n_nodes, d), dtype=bool)
@@ -115,6 +117,7 @@ class Simulation:
         self._work = None                            # local [external, boundary] work (monitor)
         self._n_alloc = -1
         self._all = np.zeros(0, dtype=np.int64)
+        self._inverted = np.zeros(0, dtype=np.int8)  # flagged by commit, reported by the guards
         if shape not in SHAPES:
             raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
         if shape != "mpm" and not integrator.explicit:
@@ -155,7 +158,7 @@ class Simulation:
             return self.cfl * self.dt_critical
         if not isinstance(dt, (int, float, np.floating)) or not math.isfinite(dt) or dt <= 0:
             raise ValueError(f"Simulation: 'dt' must be > 0, got {dt!r}")
-        if self.integrator.explicit and dt > self.dt_critical:
+        if self.integrator.explicit and dt > self.dt_critical * (1.0 + 1e-12):   # round-off in h
             raise ValueError(f"Simulation: dt = {dt:.4g} exceeds the explicit critical time step "
                              f"{self.dt_critical:.4g} s (h = {self.grid.h:.4g}, stability factor "
                              f"{getattr(self.integrator, 'stability_factor', 1.0):.4g} x h / c_p)")
@@ -498,7 +501,9 @@ class Simulation:
         """Accept dF, the trial stress and history: update F, V, stress, state and stress work."""
         p = self.particles
         t0 = time.perf_counter()
-        kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work)
+        if len(self._inverted) != len(p):
+            self._inverted = np.zeros(len(p), dtype=np.int8)
+        kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work, self._inverted)
         if self.splitting is not None:
             self.splitting.push_forward(self, dF)
         if p.state.shape[1]:

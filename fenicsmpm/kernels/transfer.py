@@ -156,12 +156,21 @@ def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
 
 
 @njit(cache=True)
-def commit_step(dF, F, V, sigma, sigma_new, work):
+def commit_step(dF, F, V, sigma, sigma_new, work, inverted):
     """Accept a step for every particle, in one pass: work += trapezoidal stress work,
-    V <- det(dF) V, F <- dF F, sigma <- sigma_new."""
+    V <- det(dF) V, F <- dF F, sigma <- sigma_new. A particle whose increment inverts it
+    (det dF <= 0: flag 1) or whose increment is not finite (flag 2) keeps its state and is
+    flagged in `inverted` for the guards, so no NaN stress of an inverted material point is
+    ever committed. Returns their count."""
     tmp = np.empty((3, 3))
+    n_bad = 0
     for p in range(dF.shape[0]):
-        V_new = det3(dF[p]) * V[p]
+        J = det3(dF[p])
+        if not (J > 0.0) or not np.isfinite(J):
+            inverted[p] = 1 if np.isfinite(J) else 2
+            n_bad += 1
+            continue
+        V_new = J * V[p]
         work[p] += work_increment(dF[p], sigma[p], sigma_new[p], V[p], V_new)
         V[p] = V_new
         for i in range(3):
@@ -171,6 +180,7 @@ def commit_step(dF, F, V, sigma, sigma_new, work):
             for j in range(3):
                 F[p, i, j] = tmp[i, j]
                 sigma[p, i, j] = sigma_new[p, i, j]
+    return n_bad
 
 
 # ---------------------------------------------------------------------- CSR assembly
