@@ -53,3 +53,14 @@ def test_observer_called_every_n_steps():
     assert all(abs(e / ex["energy"] - 1) < 0.02 for _, e in seen)
     with pytest.raises(ValueError, match="every"):
         sim.observe(lambda s: None, every=0)
+
+
+def test_ksp_failure_names_step_time_and_reason():
+    """CG limited to one iteration cannot reach rtol 1e-12: the KSP reports DIVERGED_MAX_IT and
+    the error says at which step, time and Newton iteration."""
+    opts = {"ksp_type": "cg", "pc_type": "none", "ksp_max_it": 1, "ksp_rtol": 1e-12}
+    sim, _ = vibrating_bar(fm.Newmark(petsc_options=opts), n_cells=8)
+    sim.run(steps=0)
+    with pytest.raises(RuntimeError, match=r"step 0, t = 0, Newton iteration 0: KSP failed: "
+                                           r"converged reason -3 \(DIVERGED_MAX_IT\) after 1 iterations"):
+        sim.step()

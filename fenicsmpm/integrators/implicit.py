@@ -135,7 +135,11 @@ class _Newton:
                 if B is not None:
                     sys.add(B)
             t3 = time.perf_counter()
-            delta = sys.solve(R)
+            try:
+                delta = sys.solve(R)
+            except RuntimeError as err:               # KSP failure: say when and where
+                raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}, Newton iteration "
+                                   f"{it}: {err}") from err
             du += delta
             dnorm = self._norm(sim, delta)
             t4 = time.perf_counter()
