@@ -164,10 +164,9 @@ def read(sim, path):
         pr.rows = sorted(rows)
         pr._version = -1
         if pr.writer is not None:
+            d = pr.data()
             pr.writer.close()
-            pr.writer = type(pr.writer)(pr.path, pr.columns, comm)
-            for r in pr.rows:
-                pr.writer.write_row(r)
+            pr.rewrite_csv(np.column_stack([d[c] for c in pr.columns]))
     sim.t, sim.step_count, sim.dt = meta["t"], meta["step_count"], meta["dt"]
     sim.stage_start, sim.initial_stress = meta["stage_start"], meta["initial_stress"]
     sim.gravity = np.asarray(meta["gravity"], dtype=np.float64)

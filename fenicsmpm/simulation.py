@@ -686,8 +686,6 @@ class Simulation:
             bar.close()
             if output is not None:
                 output.close()
-            for pr in self.probes:
-                pr.write_csv()
         return self
 
 
@@ -721,8 +719,12 @@ class Probe:
             cols += [f"{f}_{c}" for c in self._components(f)]
         self.columns = cols
         self.path = path
-        # serial runs stream rows to the CSV; parallel runs write it once per run() (rank 0)
-        self.writer = ProbeWriter(path, cols, sim.comm) if path and sim.comm.size == 1 else None
+        # the CSV is streamed: rank 0 writes the header, then whichever rank owns the particle
+        # appends its row (flushed), so a crashed run leaves every row up to its last step
+        self.writer = None
+        if path:
+            self.rewrite_csv([])
+            self.writer = ProbeWriter(path, cols, sim.comm, append=True)
         self.record()
 
     def _components(self, f):
@@ -763,16 +765,17 @@ class Probe:
         rows = np.array(rows).reshape(-1, len(self.columns))
         return {c: rows[:, j] for j, c in enumerate(self.columns)}
 
-    def write_csv(self):
-        """Write the CSV of a parallel run (collective; `run` calls it at the end, call it
-        yourself after stepping with `step`). Serial runs stream rows as they come."""
-        if self.path and self.sim.comm.size > 1:
-            d = self.data()
-            if self.sim.comm.rank == 0:
-                w = ProbeWriter(self.path, self.columns, None)
-                for row in np.column_stack([d[c] for c in self.columns]):
-                    w.write_row(list(row))
-                w.close()
+    def rewrite_csv(self, rows):
+        """Start the CSV afresh with `rows` (rank 0; collective), e.g. after a restore."""
+        comm = self.sim.comm
+        if comm.rank == 0:
+            w = ProbeWriter(self.path, self.columns, None)
+            w._open()
+            for row in rows:
+                w.write_row(list(row))
+            w.close()
+        if comm.size > 1:
+            comm.barrier()
 
 
 class Output:

@@ -226,3 +226,27 @@ def test_leaving_particles_removed_and_counted():
     assert np.isclose(m + sim.removed_mass, m0, rtol=1e-14)
     with pytest.raises(ValueError, match="on_leave"):
         fm.Simulation(grid, sim.particles, fm.Explicit(), dt=0.005, on_leave="drop")
+
+
+def test_probe_csv_is_streamed_while_the_particle_changes_rank(shared_tmp_path):
+    """Nothing lost on a crash: the probe's CSV holds every row up to the current step during
+    the run, written by whichever rank owns the particle (it crosses x = 0.5, the rank cut)."""
+    from fenicsmpm.io import read_probe_csv
+    path = os.path.join(shared_tmp_path, "probe.csv")
+    sim, _ = colliding_discs(fm.Explicit("USL"), n_cells=12, cfl=0.3, speed=0.2,
+                             partitioner=strips(12, 12))
+    pr = sim.probe((0.39, 0.2), fields=("position", "velocity"), path=path)
+    seen = []
+
+    def check(s):
+        WORLD.barrier()                                   # the owner has flushed its row
+        if WORLD.rank == 0:
+            seen.append(len(read_probe_csv(path)["t"]))
+    sim.observe(check, every=10)
+    sim.run(steps=50)
+    assert WORLD.bcast(seen, root=0) == [11, 21, 31, 41, 51]
+    d = pr.data()
+    assert d["position_x"][0] < 0.5 < d["position_x"][-1]          # crossed the rank cut
+    WORLD.barrier()
+    f = read_probe_csv(path)
+    assert np.array_equal(f["t"], d["t"]) and np.allclose(f["position_x"], d["position_x"])

@@ -32,7 +32,7 @@ class ProbeWriter:
     line-buffered, so a crash loses at most the row being written.
     """
 
-    def __init__(self, path, columns, comm=None, root=0):
+    def __init__(self, path, columns, comm=None, root=0, append=False):
         self.path = os.fspath(path)
         self.columns = [str(c) for c in columns]
         if not self.columns:
@@ -43,6 +43,7 @@ class ProbeWriter:
         self.root = root
         self.rank = comm.Get_rank() if comm is not None else 0
         self._file = None
+        self.append = bool(append)       # add rows to an existing file (header written before)
         self.rows_written = 0
 
     @property
@@ -53,8 +54,10 @@ class ProbeWriter:
         parent = os.path.dirname(self.path)
         if parent:
             os.makedirs(parent, exist_ok=True)
-        self._file = open(self.path, "w", buffering=1, encoding="ascii", newline="\n")
-        self._file.write(",".join(self.columns) + "\n")
+        self._file = open(self.path, "a" if self.append else "w", buffering=1, encoding="ascii",
+                          newline="\n")
+        if not self.append:
+            self._file.write(",".join(self.columns) + "\n")
 
     def write_row(self, values):
         """Write one row: a sequence in column order, or a dict column -> value."""
