@@ -18,7 +18,7 @@ import numpy as np
 
 from .validation import check_open_interval, check_positive
 
-__all__ = ["LinearElastic", "IsotropicElasticParameters",
+__all__ = ["LinearElastic", "IsotropicElasticParameters", "jaumann_tangent",
            "linear_elastic_stress_kernel", "linear_elastic_tangent_kernel"]
 
 
@@ -119,6 +119,29 @@ def linear_elastic_stress_kernel(idx, dF, sigma_old, sigma_new, lam, mu):
 
 
 @numba.njit(cache=True)
+def jaumann_tangent(i, j, k, l, lam, mu, s):
+    """d sigma_ij / d dF_kl of the Jaumann-rate elastic update with s = sigma_old:
+    lam d_ij d_kl + mu (d_ik d_jl + d_il d_jk) + 1/2 (d_ik s_lj - d_il s_kj)
+    - 1/2 (s_ik d_jl - s_il d_jk) (also the elastic predictor of the plastic models)."""
+    v = 0.0
+    if i == j and k == l:
+        v += lam
+    if i == k and j == l:
+        v += mu
+    if i == l and j == k:
+        v += mu
+    if i == k:
+        v += 0.5 * s[l, j]
+    if i == l:
+        v -= 0.5 * s[k, j]
+    if j == l:
+        v -= 0.5 * s[i, k]
+    if j == k:
+        v += 0.5 * s[i, l]
+    return v
+
+
+@numba.njit(cache=True)
 def linear_elastic_tangent_kernel(idx, sigma_old, dsig, lam, mu):
     """dsig[p,i,j,k,l] = lam d_ij d_kl + mu (d_ik d_jl + d_il d_jk)
     + 1/2 (d_ik s_lj - d_il s_kj) - 1/2 (s_ik d_jl - s_il d_jk),  s = sigma_old."""
@@ -128,22 +151,7 @@ def linear_elastic_tangent_kernel(idx, sigma_old, dsig, lam, mu):
             for j in range(3):
                 for k in range(3):
                     for l in range(3):
-                        v = 0.0
-                        if i == j and k == l:
-                            v += lam
-                        if i == k and j == l:
-                            v += mu
-                        if i == l and j == k:
-                            v += mu
-                        if i == k:
-                            v += 0.5 * sigma_old[p, l, j]
-                        if i == l:
-                            v -= 0.5 * sigma_old[p, k, j]
-                        if j == l:
-                            v -= 0.5 * sigma_old[p, i, k]
-                        if j == k:
-                            v += 0.5 * sigma_old[p, i, l]
-                        dsig[p, i, j, k, l] = v
+                        dsig[p, i, j, k, l] = jaumann_tangent(i, j, k, l, lam, mu, sigma_old[p])
 
 
 class LinearElastic(IsotropicElasticParameters):

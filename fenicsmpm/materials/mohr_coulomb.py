@@ -34,7 +34,7 @@ import math
 import numba
 import numpy as np
 
-from .linear_elastic import IsotropicElasticParameters
+from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .validation import check_real
 
 __all__ = ["MohrCoulomb", "mohr_coulomb_stress_kernel", "mohr_coulomb_tangent_kernel"]
@@ -368,22 +368,7 @@ def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, s
                 # E = d sigma_tr / d dF_kl (Jaumann predictor, see LinearElastic)
                 for i in range(3):
                     for j in range(3):
-                        v = 0.0
-                        if i == j and k == l:
-                            v += lam
-                        if i == k and j == l:
-                            v += mu
-                        if i == l and j == k:
-                            v += mu
-                        if i == k:
-                            v += 0.5 * sigma_old[p, l, j]
-                        if i == l:
-                            v -= 0.5 * sigma_old[p, k, j]
-                        if j == l:
-                            v -= 0.5 * sigma_old[p, i, k]
-                        if j == k:
-                            v += 0.5 * sigma_old[p, i, l]
-                        E[i, j] = v
+                        E[i, j] = jaumann_tangent(i, j, k, l, lam, mu, sigma_old[p])
                 if elastic:
                     for i in range(3):
                         for j in range(3):

@@ -23,7 +23,7 @@ import math
 import numba
 import numpy as np
 
-from .linear_elastic import IsotropicElasticParameters
+from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .mohr_coulomb import _trial
 from .validation import check_positive, check_real
 
@@ -92,22 +92,7 @@ def von_mises_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_re
             for l in range(3):
                 for i in range(3):
                     for j in range(3):
-                        v = 0.0
-                        if i == j and k == l:
-                            v += lam
-                        if i == k and j == l:
-                            v += mu
-                        if i == l and j == k:
-                            v += mu
-                        if i == k:
-                            v += 0.5 * sigma_old[p, l, j]
-                        if i == l:
-                            v -= 0.5 * sigma_old[p, k, j]
-                        if j == l:
-                            v -= 0.5 * sigma_old[p, i, k]
-                        if j == k:
-                            v += 0.5 * sigma_old[p, i, l]
-                        E[i, j] = v
+                        E[i, j] = jaumann_tangent(i, j, k, l, lam, mu, sigma_old[p])
                 tr = (E[0, 0] + E[1, 1] + E[2, 2]) / 3.0
                 nx = 0.0
                 for i in range(3):
