@@ -5,8 +5,9 @@
 
 BENCHMARKS.md W5 (seed 000 ch. 5): a plane-strain half model of a strip footing of width
 B = 0.5 m (the loaded half-width B/2 = 0.25 m next to the symmetry axis x = 0) on a layer
-D = 6 m wide and H = 4 m deep, dx = 0.0625 m (--quick: 0.25 m), 2 x 2 particles per cell,
-dt = 0.005 s. Soil: von Mises clay (fm.VonMises) E = 2 MPa, nu = 0.41, rho = 1000 kg/m^3,
+D = 6 m wide and H = 4 m deep, dx = 0.125 m (--quick: 0.25 m), 2 x 2 particles per cell,
+dt = 0.005 s (at the seed's dx = 0.0625 m the softening band localises under the footing and
+Newton stops converging after t ~ 0.6 s even with step cuts: no regularisation here). Soil: von Mises clay (fm.VonMises) E = 2 MPa, nu = 0.41, rho = 1000 kg/m^3,
 c_u = 10 kPa softening linearly (H = -140 kPa) to c_res = 3 kPa; c_p = 68.2 m/s.
 
 Stage 1 (geostatic): quasi-static Newton, gravity g = 10 m/s^2 ramped over 50 steps and held
