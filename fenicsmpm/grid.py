@@ -243,8 +243,10 @@ def vertex_ghost_partitioner(partitioner=None):
     mode). GIMP and CPDI shape functions need it in parallel, e.g.
         create_rectangle(comm, pts, n, CellType.quadrilateral,
                          partitioner=fenicsmpm.grid.vertex_ghost_partitioner())
-    `partitioner` (default dolfinx's create_cell_partitioner()) chooses the owners; each
-    rank's input cells are gathered on every rank to find the vertex neighbours."""
+    `partitioner` (default dolfinx's create_cell_partitioner()) chooses the owners. The
+    vertex neighbours are found without gathering the mesh: each (vertex, owner) pair goes to
+    the vertex's home rank (vertex mod size), which returns every owner of the vertex to the
+    ranks holding a cell that uses it (two all-to-all exchanges)."""
     from dolfinx import graph
     from dolfinx.cpp.mesh import create_cell_partitioner
     base = create_cell_partitioner() if partitioner is None else partitioner
@@ -254,20 +256,41 @@ def vertex_ghost_partitioner(partitioner=None):
         n = len(cells.offsets) - 1
         owner = np.asarray(dest.array)[np.asarray(dest.offsets)[:-1]].astype(np.int64)
         k = int(cells.offsets[1] - cells.offsets[0]) if n else 0
-        arr = np.asarray(cells.array, dtype=np.int64).reshape(n, k) if n else np.zeros((0, 0), np.int64)
-        parts = comm.allgather((arr, owner))
-        verts = np.concatenate([a.ravel() for a, _ in parts])
-        owners = np.concatenate([np.repeat(o, a.shape[1]) for a, o in parts])
-        pairs = np.unique(np.stack([verts, owners], axis=1), axis=0)   # (vertex, owning rank)
-        start = np.searchsorted(pairs[:, 0], arr.ravel(), side="left").reshape(arr.shape)
-        stop = np.searchsorted(pairs[:, 0], arr.ravel(), side="right").reshape(arr.shape)
-        dests, offsets = [], [0]
-        for c in range(n):
-            ranks = {int(r) for a, b in zip(start[c], stop[c]) for r in pairs[a:b, 1]}
-            ranks.discard(int(owner[c]))
-            row = [int(owner[c])] + sorted(ranks)
-            dests += row
-            offsets.append(len(dests))
-        return graph.create_adjacencylist(np.array(dests, dtype=np.int32),
-                                          np.array(offsets, dtype=np.int32))
+        arr = np.asarray(cells.array, dtype=np.int64).reshape(n, k)
+        pairs = _vertex_owners(comm, arr.ravel(), np.repeat(owner, k))
+        # (cell, rank) for every owner rank of every vertex of the cell
+        lo = np.searchsorted(pairs[:, 0], arr.ravel(), side="left")
+        cnt = np.searchsorted(pairs[:, 0], arr.ravel(), side="right") - lo
+        cell = np.repeat(np.repeat(np.arange(n), k), cnt)
+        take = np.repeat(lo - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())
+        cr = np.unique(np.stack([cell, pairs[take, 1]], axis=1), axis=0)
+        cr = cr[cr[:, 1] != owner[cr[:, 0]]]                    # ghosts: ranks other than owner
+        rows = np.concatenate([np.stack([np.arange(n), owner], axis=1), cr])
+        rows = rows[np.lexsort((np.r_[np.zeros(n), np.ones(len(cr))], rows[:, 0]))]
+        offsets = np.searchsorted(rows[:, 0], np.arange(n + 1)).astype(np.int32)
+        return graph.create_adjacencylist(rows[:, 1].astype(np.int32), offsets)
     return partition
+
+
+def _vertex_owners(comm, vertices, owners):
+    """Sorted unique (vertex, owner rank) pairs for every vertex in `vertices`, whatever rank
+    holds the other cells using it (distributed by vertex mod size)."""
+    size = comm.size
+    me = np.stack([vertices, owners], axis=1)
+
+    def route(rows, to):
+        order = np.argsort(to, kind="stable")
+        counts = np.bincount(to, minlength=size)
+        return comm.alltoall(np.split(rows[order], np.cumsum(counts)[:-1]))
+
+    got = route(np.c_[me, np.full(len(me), comm.rank)], vertices % size)
+    got = np.concatenate(got) if got else np.zeros((0, 3), np.int64)
+    known = np.unique(got[:, :2], axis=0)                       # (vertex, owner) at home
+    asked = np.unique(got[:, [0, 2]], axis=0)                   # (vertex, asking rank)
+    lo = np.searchsorted(known[:, 0], asked[:, 0], side="left")
+    cnt = np.searchsorted(known[:, 0], asked[:, 0], side="right") - lo
+    take = np.repeat(lo - np.r_[0, np.cumsum(cnt)[:-1]], cnt) + np.arange(cnt.sum())
+    reply = known[take]
+    back = route(reply, np.repeat(asked[:, 1], cnt))
+    back = np.concatenate(back) if back else np.zeros((0, 2), np.int64)
+    return np.unique(back.reshape(-1, 2), axis=0)
