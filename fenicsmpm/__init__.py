@@ -8,7 +8,7 @@
 """
 from .grid import Grid
 from .particles import Particles
-from .materials import LinearElastic, NeoHookean, MohrCoulomb, VonMises
+from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
@@ -36,6 +36,6 @@ def _abort_all_ranks_on_uncaught_exception():
 
 
 _abort_all_ranks_on_uncaught_exception()
-__all__ = ["Grid", "Particles", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "Explicit", "Newmark",
+__all__ = ["Grid", "Particles", "Hencky", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "Explicit", "Newmark",
            "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic", "ParticleLayer"]
 __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]

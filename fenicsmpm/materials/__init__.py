@@ -13,11 +13,12 @@ Interface of a material (see LinearElastic):
                                  dsig = d sigma_new / d dF, with `state` the committed history
     density, p_wave_speed        for masses and the critical time step
 """
+from .hencky import Hencky
 from .linear_elastic import LinearElastic
 from .mohr_coulomb import MohrCoulomb
 from .neo_hookean import NeoHookean
 from .von_mises import VonMises
 from .piola import first_piola, first_piola_tangent, strain_energy_increment
 
-__all__ = ["LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
+__all__ = ["Hencky", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
            "first_piola_tangent", "strain_energy_increment"]
