@@ -11,6 +11,7 @@ from .particles import Particles
 from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
+from .integrators import ExplicitContact, set_body
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .simulation import Simulation, Probe, Output
 from . import partition
@@ -39,3 +40,4 @@ _abort_all_ranks_on_uncaught_exception()
 __all__ = ["Grid", "Particles", "Hencky", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "Explicit", "Newmark",
            "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic", "ParticleLayer"]
 __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
+__all__ += ["ExplicitContact", "set_body"]

@@ -3,5 +3,7 @@ and quasi-static (Newton + PETSc KSP)."""
 from .explicit import Explicit
 from .implicit import Newmark, QuasiStatic
 from .generalized_alpha import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
+from .contact import ExplicitContact, set_body
 
 __all__ = ["Explicit", "Newmark", "QuasiStatic", "ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
+__all__ += ["ExplicitContact", "set_body"]
