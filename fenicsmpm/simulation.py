@@ -220,9 +220,9 @@ class Simulation:
         gravity_ramp: ramp time T of this stage's gravity (see Simulation), None: no ramp."""
         p = self.particles
         if integrator is not None:
-            if self.frictions and not integrator.explicit:
-                raise NotImplementedError("start_stage: frictional boundaries need an explicit "
-                                          f"integrator, not {type(integrator).__name__}")
+            if self.frictions and not getattr(integrator, "supports_friction", False):
+                raise NotImplementedError("start_stage: frictional boundaries need fm.Explicit, "
+                                          f"not {type(integrator).__name__}")
             self.integrator = integrator
             integrator.setup(self)
             self._robin = None                    # recompile for the new integrator
@@ -251,9 +251,9 @@ class Simulation:
         `normal` and Coulomb coefficient `mu` (boundaries.friction; seed 002 §5.1): no
         penetration, separation allowed, stick or slip. Explicit integrators only; do not also
         `fix` the normal component there."""
-        if not self.integrator.explicit:
-            raise NotImplementedError(f"add_friction: frictional boundaries need an explicit "
-                                      f"integrator, not {type(self.integrator).__name__}")
+        if not getattr(self.integrator, "supports_friction", False):
+            raise NotImplementedError(f"add_friction: frictional boundaries need fm.Explicit, "
+                                      f"not {type(self.integrator).__name__}")
         self.frictions.append(FrictionalBoundary(where, mu, normal).bind(self.grid))
 
     def enable_splitting(self, alpha=2.0, beta=0.5, gamma=1.0, every=1):
@@ -302,6 +302,20 @@ class Simulation:
             self._layer = np.flatnonzero(np.any(p.layer_an0 != 0.0, axis=1)).astype(np.int64)
             self._layer_version = (p.version, len(p))
         return self._layer
+
+    def boundary_force(self, v_grid):
+        """Robin (mesh facets) and particle-layer tractions of the start-of-step state with nodal
+        velocities v_grid, summed over ranks; None when there are no such boundaries."""
+        if self.robin is None and not self.layers:
+            return None
+        p = self.particles
+        fr = np.zeros((self.grid.n_nodes, self.gdim))
+        if self.robin is not None:
+            self.robin.force(self.robin_u, v_grid, fr)
+        if self.layers:
+            self.layer_force(p.u - p.layer_u0, p.v, fr)
+        self.grid.accumulate(fr)
+        return fr
 
     def layer_force(self, u_rel, v, out):
         """out += local particle-layer tractions for particle displacements u_rel (since the

@@ -23,6 +23,7 @@ SCHEMES = ("USF", "USL", "MUSL", "AVG")
 class Explicit:
     explicit = True
     records_work = True
+    supports_friction = True
 
     def __init__(self, scheme="MUSL", flip=1.0):
         scheme = str(scheme).upper()
@@ -74,14 +75,8 @@ class Explicit:
         grid.accumulate(f)
         f_ext = sim.external_force(sim.t, m, active=active)
         f += f_ext
-        fr = None
-        if sim.robin is not None or sim.layers:    # Robin tractions from the start-of-step state
-            fr = np.zeros_like(f)
-            if sim.robin is not None:
-                sim.robin.force(sim.robin_u, v0, fr)
-            if sim.layers:
-                sim.layer_force(p.u - p.layer_u0, p.v, fr)
-            grid.accumulate(fr)
+        fr = sim.boundary_force(v0)                # Robin tractions from the start-of-step state
+        if fr is not None:
             f += fr
         t1 = time.perf_counter()
         v1 = v0 + dt * f * inv_m[:, None] * free

@@ -176,13 +176,8 @@ class ExplicitGeneralizedAlpha:
         sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
         f += sim.external_force(sim.t, m, active=active)
-        if sim.robin is not None or sim.layers:
-            fr = np.zeros_like(f)
-            if sim.robin is not None:
-                sim.robin.force(sim.robin_u, v0, fr)
-            if sim.layers:
-                sim.layer_force(p.u - p.layer_u0, p.v, fr)
-            grid.accumulate(fr)
+        fr = sim.boundary_force(v0)
+        if fr is not None:
             f += fr
         t1 = time.perf_counter()
         a1, v1, du = explicit_update(prm, dt, v0, a0, f * inv_m[:, None] * free)
