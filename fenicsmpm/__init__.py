@@ -13,6 +13,7 @@ from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
 from .integrators import ExplicitContact, set_body
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
+from .boundaries import CompliantBase, InputMotion, compliant_base, rigid_base
 from .simulation import Simulation, Probe, Output
 from . import partition
 
@@ -40,4 +41,5 @@ _abort_all_ranks_on_uncaught_exception()
 __all__ = ["Grid", "Particles", "Hencky", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "Explicit", "Newmark",
            "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic", "ParticleLayer"]
 __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
+__all__ += ["CompliantBase", "InputMotion", "compliant_base", "rigid_base"]
 __all__ += ["ExplicitContact", "set_body"]

@@ -67,6 +67,7 @@ class Grid:
         self.structured = self._structured is not None
         self._tree = None
         self._exchange = {}
+        self.periodic = None     # boundaries.periodic.PeriodicTie, applied by accumulate
 
     # ------------------------------------------------------------------ geometry data
     def _affine_data(self):
@@ -221,8 +222,11 @@ class Grid:
     def accumulate(self, *arrays):
         """Sum nodal contributions across ranks (reverse scatter with add, then forward).
 
-        A no-op on one rank. Each array has shape (n_nodes,) or (n_nodes, k)."""
+        A no-op on one rank. Each array has shape (n_nodes,) or (n_nodes, k). With periodic
+        sides (`periodic`, boundaries.periodic) the sums are then tied over the node pairs."""
         if self.comm.size == 1:
+            if self.periodic is not None:
+                self.periodic.tie(*arrays)
             return
         from dolfinx.la import ScatterMode, vector
         imap = self.V.dofmap.index_map
@@ -235,6 +239,8 @@ class Grid:
             vec.scatter_reverse(ScatterMode.add)
             vec.scatter_forward()
             arr[...] = vec.array.reshape(arr.shape)
+        if self.periodic is not None:
+            self.periodic.tie(*arrays)
 
 
 def vertex_ghost_partitioner(partitioner=None):

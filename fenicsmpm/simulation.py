@@ -19,7 +19,7 @@ from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
 
-LEAVE_POLICIES = ("error", "remove")
+LEAVE_POLICIES = ("error", "remove", "periodic")
 SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2")
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
                 "acceleration": "a"}
@@ -42,7 +42,8 @@ class Simulation:
     inactive (no velocity, no division by a vanishing mass; constrained in implicit solves).
     on_leave: what happens to particles that leave the mesh: "error" (stop with their ids and
     positions) or "remove" (drop them; the removed mass is counted in `removed_mass`, and
-    reported as a warning).
+    reported as a warning) or "periodic" (re-enter through the opposite periodic face, see
+    set_periodic; particles leaving elsewhere stop the run as with "error").
     max_dt_cuts: implicit runs only: when Newton or the KSP fails, retry the step as two
     half steps, at most this many halvings deep (each retry is logged as a warning).
     gravity_ramp: None, or a time T: gravity grows smoothly over the first T/2 of the stage,
@@ -114,6 +115,7 @@ class Simulation:
         self.gravity_ramp = _check_ramp(gravity_ramp, "Simulation")
         self.removed_mass = 0.0
         self.removed_count = 0
+        self.base_motion = None                      # boundaries.base_motion.RigidBase (relative frame)
         self._work = None                            # local [external, boundary] work (monitor)
         self._n_alloc = -1
         self._all = np.zeros(0, dtype=np.int64)
@@ -246,6 +248,18 @@ class Simulation:
         p.a[:] = 0.0
         self.stage_start = self.t
 
+    def set_periodic(self, axis=0):
+        """Periodic sides normal to `axis` (boundaries.periodic): the node pairs at equal
+        position on the two faces are tied (masses, momenta, forces summed; one solution, in
+        explicit and implicit runs). With on_leave="periodic" a particle leaving through one
+        face re-enters through the other. shape="mpm" only. Returns the PeriodicTie."""
+        from .boundaries.periodic import PeriodicTie
+        if self.shape != "mpm":
+            raise NotImplementedError(f"set_periodic: shape={self.shape!r}; periodic sides "
+                                      f"support shape='mpm' only")
+        self.grid.periodic = PeriodicTie(self.grid, axis)
+        return self.grid.periodic
+
     def add_friction(self, where, mu, normal):
         """A rigid, flat frictional boundary on the grid nodes where(x) with outward unit normal
         `normal` and Coulomb coefficient `mu` (boundaries.friction; seed 002 §5.1): no
@@ -342,8 +356,19 @@ class Simulation:
     def _particles_left(self, ids, xs):
         """Apply the `on_leave` policy to particles in no cell of the mesh (cell == -1; `ids`
         and `xs` list them globally, the same on every rank)."""
+        if self.on_leave == "periodic":             # re-enter through the opposite face
+            from .boundaries.periodic import wrap
+            if self.grid.periodic is None:
+                raise ValueError("Simulation: on_leave='periodic' needs periodic sides "
+                                 "(sim.set_periodic(axis))")
+            wrap(self, self.grid.periodic)
+            ids, xs = self.particles.send_to_owners()
+            if len(ids) == 0:
+                return
         where = (f"step {self.step_count}, t = {self.t:.6g}: {len(ids)} particle(s) left the mesh, "
                  f"ids {ids[:5].tolist()} at {np.round(xs[:5], 6).tolist()}")
+        if self.on_leave == "periodic":
+            raise ParticlesLeftMesh(where)
         if self.on_leave == "error":
             raise ParticlesLeftMesh(where)
         p = self.particles
@@ -439,6 +464,8 @@ class Simulation:
             if tau < 0.5:
                 gravity_scale *= 0.5 * (math.sin(2 * math.pi * tau - 0.5 * math.pi) + 1.0)
         f = m[:, None] * (gravity_scale * self.gravity)
+        if self.base_motion is not None:             # relative frame of a rigid base: -m a_g(t)
+            f -= m[:, None] * self.base_motion.frame_acceleration(t, self.gdim)
         if self.tractions:
             if self._traction_forms is None:
                 self._traction_forms = TractionForms(self.grid, self.tractions)

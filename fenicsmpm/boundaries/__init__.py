@@ -3,6 +3,8 @@ from .dirichlet import fixed_dofs
 from .particle_layer import ParticleLayer
 from .robin import Robin, RobinForms, Viscoelastic, Viscous
 from .traction import Traction, TractionForms
+from .base_motion import CompliantBase, InputMotion, RigidBase, compliant_base, rigid_base
+from .periodic import PeriodicTie
 
 __all__ = ["fixed_dofs", "ParticleLayer", "Robin", "RobinForms", "Traction", "TractionForms", "Viscoelastic",
            "Viscous"]

@@ -88,6 +88,8 @@ class LinearSystem:
             extra(self.data)
         own = self.n_owned_dofs
         d = self.diag[:own]
+        if self.grid.periodic is not None:          # tied mass: on the master rows only
+            diag_add = np.where(self.grid.periodic.slave_dofs(self.bs), 0.0, diag_add)
         self.data[d] += np.where(constrained[:own], 1.0, diag_add[:own])
         self.A.zeroEntries()
         self.A.setValuesLocalCSR(self.indptr, self.indices, self.data, addv=PETSc.InsertMode.ADD)
@@ -100,8 +102,14 @@ class LinearSystem:
     def solve(self, R):
         """Solve K dx = R, where R (n_nodes, gdim) is complete (already summed) on every rank."""
         self.b.x.array[:] = R.ravel()
+        tie = self.grid.periodic                    # master-slave reduction (boundaries.periodic)
+        if tie is not None:
+            self.b.x.array[tie.slave_dofs(self.bs)] = 0.0
+            self.ksp.setOperators(tie.reduce(self.A))
         self.b.x.scatter_forward()
         self.ksp.solve(self.b.vector, self.x.vector)
+        if tie is not None:
+            tie.expand(self.x.vector.copy(), self.x.vector)
         reason = self.ksp.getConvergedReason()
         self.iterations = self.ksp.getIterationNumber()
         if reason < 0:
