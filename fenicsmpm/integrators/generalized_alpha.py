@@ -117,28 +117,56 @@ class ExplicitGeneralizedAlpha:
     follow Omega_s(rho_b).
 
     Step (lumped mass, active nodes; inactive nodes and fixed components hold zero):
-      1. P2G: m_i, (m v)_i, (m a)_i from the particles; the start-of-step grid velocity is
-           v_i^n = (m v)_i / m_i + (gamma - 1/2) dt (a_i^n - (m a)_i / m_i).
-      2. a_i^{n+1-alpha_m} = (f_ext - f_int)_i / m_i from the start-of-step stress, then
+      1. P2G: m_i, (m v)_i, (m a)_i from the particles; v_i^n = (m v)_i / m_i and
+         a_i^n = (m a)_i / m_i, rebuilt from the particles every step.
+      2. a_i^{n+1-alpha_m} = (f_ext - f_int + f_b)_i / m_i from the start-of-step stress, then
          a^{n+1}, v^{n+1}, du from `explicit_update` (BENCHMARKS P steps 2-4).
       3. Particles (`g2p_generalized_alpha`): x, u += sum N du; the velocity is integrated at
          the particles (FLIP; PIC blend by `flip`); a_p = sum N a^{n+1}.
-      4. Stress from dF = I + grad du (as USL); Robin and particle-layer forces, as in
-         Explicit, come from the start-of-step state.
+      4. Stress from dF = I + grad du (as USL).
+    Robin and particle-layer forces f_b (dashpots) take the transported velocity
+    s = v - (gamma - 1/2) dt a (nodal v_i^n - (gamma - 1/2) dt a_i^n, particle
+    v_p - (gamma - 1/2) dt a_p), not v^n.
 
-    a^n is kept per node between steps (seed 003 step 9). It is rebuilt from the particles,
-    a_i^n = (m a)_i / m_i = sum_p N_ip m_p a_p / m_i, at the nodes that were not active in the
-    previous step (all nodes in the first step after setup, where p.a = 0 gives the seed's
-    a^0 = 0), and set to zero at inactive nodes.
-
-    Why the correction in step 1: the transported particle quantity is
-    s_p = v_p - (gamma - 1/2) dt a_p, for which step 3 is s_p += dt sum N (a^n + a^{n+1}) / 2.
-    With v_i^n = P2G(v_p) alone, the P2G of the G2P of a^n (not the identity in MPM) leaves
-    du with an extra dt^2 (P2G G2P - I) a^n / 2 at rho_b = 1, so the scheme would not be
-    central difference (and the V1 bar at rho_b = 1 blows up within 2000 steps even at
-    cfl 0.1). With the correction, rho_b = 1 reproduces symplectic-Euler USL
-    (fm.Explicit("USL", flip)) exactly for any a^n: same x, u, stress, and
-    v_p - dt a_p / 2 equals its particle velocity."""
+    Why a^n is rebuilt from the particles every step (like v^n; the grid is reset every step):
+    a per-node a^n carried between steps (seed 003 step 9) is only sound on a fixed set of
+    nodes with fixed masses. When a node's mass changes a lot between steps (a node that has
+    just become active with a small mass, a contact front, a Robin/absorbing base), one step's
+    a_mid = f_i / m_i at that node can be very large; the carried recursion
+    a^{n+1} = (a_mid - alpha_m a^n) / (1 - alpha_m) keeps that spike with the factor
+    -alpha_m / (1 - alpha_m) per step (-1 at rho_b = 1: never decays; -1/2 at rho_b = 0.8) while
+    the node's mass grows, and it reaches the particles with full weight: on the L2 colliding
+    discs (10 cells, cfl 0.3) at rho_b = 1 the nodal a^n grew to ~2e2 (particle velocities
+    0.1), so v_p = s_p + dt a_p / 2 and the kinetic energy were garbage (E = 27 E0 at step
+    150) although x and s_p stayed equal to USL; at rho_b = 0.8 the spike enters du with the
+    coefficient dt^2 (gamma - beta / (1 - alpha_m)) = 0.16 dt^2 and particles inverted at
+    step 114. Rebuilt from the particles, a_i^n = sum_p N_ip m_p a_p / m_i is a mass-weighted
+    average of particle accelerations, so it is bounded by them whatever the nodal mass, and
+    the parasitic mode of a^n is multiplied per step by -alpha_m / (1 - alpha_m) times an
+    eigenvalue of P2G G2P (in [0, 1]), so it cannot grow.
+    rho_b = 1 is still symplectic-Euler USL (fm.Explicit("USL", flip)) exactly, for any a^n:
+    with alpha_m = beta = 1/2, gamma = 1, du = dt (v^n - dt a^n / 2) + dt^2 f / m =
+    dt (P2G(s_p) + dt f / m) and s_p += dt sum N f / m, which is USL with v_p^USL = s_p;
+    so x, u, stress agree, v_p - dt a_p / 2 equals the USL particle velocity, and the
+    dashpot velocity s is the USL start-of-step velocity, so Robin bases agree too.
+    (An earlier version carried a^n per node and needed a correction
+    v^n = (m v) / m + (gamma - 1/2) dt (a^n - (m a) / m) for that; with a^n = (m a) / m the
+    correction is zero.)
+    Why the dashpots take s: explicit dashpot forces at v^n are unconditionally unstable at
+    rho_b = 1 (pure damper, c dt / m = 0.1: spectral radius 1.105) and a pure damper is stable
+    only for c dt / m <= 0.5 at rho_b = 0.8 (W1 column, viscous base: inverted particles at
+    rho_b = 1, particles through the base at 0.8); at s a pure damper is stable up to
+    c dt / m = 2 (USL's limit) for every rho_b, with stiffness the stable region contains that
+    of v^n, and at rho_b = 1 it is USL's, Omega^2 + 2 c dt / m <= 4 (tests: damper stability).
+    Near Omega_s the combined limit is tighter for rho_b < 1 than for USL (rho_b = 0.8,
+    Omega = 0.9 Omega_s: c dt / m < 0.125).
+    Cost: no extra transfers (the P2G of m_p a_p was already done); for rho_b < 1 the
+    alpha_m blend uses the transfer-smoothed a^n, P2G G2P a^n = a^n + O(h^2) for smooth
+    fields but about a^n / 4 for the grid zigzag, so the algorithmic damping of the grid's
+    highest modes is not the single-DOF figure (in MPM the FLIP transfers already remove the
+    grid zigzag within ~10 steps at every rho_b, USL included). s lags v^n by
+    (gamma - 1/2) dt (dt / 2 at rho_b = 1, as USL's own start-of-step velocity), so a dashpot
+    is first order in time, as in USL."""
     explicit = True
 
     def __init__(self, rho_b=0.8, flip=1.0):
@@ -147,11 +175,23 @@ class ExplicitGeneralizedAlpha:
             raise ValueError(f"ExplicitGeneralizedAlpha: 'flip' must be in [0, 1], got {flip!r}")
         self.rho_b, self.flip = self.params.rho_b, float(flip)
         self.stability_factor = 0.5 * self.params.omega_s
-        self._a = self._active = None
 
     def setup(self, sim):
-        self._a = np.zeros((sim.grid.n_nodes, sim.gdim))
-        self._active = np.zeros(sim.grid.n_nodes, dtype=bool)
+        pass
+
+    @staticmethod
+    def _boundary_force(sim, v_grid, lag):
+        """sim.boundary_force with the dashpots at the transported velocity: Robin facets at
+        the nodal v_grid, particle layers at v_p - lag a_p (lag = (gamma - 1/2) dt)."""
+        if not sim.layers:
+            return sim.boundary_force(v_grid)
+        p = sim.particles
+        fr = np.zeros((sim.grid.n_nodes, sim.gdim))
+        if sim.robin is not None:
+            sim.robin.force(sim.robin_u, v_grid, fr)
+        sim.layer_force(p.u - p.layer_u0, p.v - lag * p.a, fr)
+        sim.grid.accumulate(fr)
+        return fr
 
     def step(self, sim, dt):
         p, grid, T, prm = sim.particles, sim.grid, sim.timers, self.params
@@ -166,17 +206,15 @@ class ExplicitGeneralizedAlpha:
         t0 = time.perf_counter()
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
         free = ~sim.fixed
-        a_p2g = ma * inv_m[:, None]
-        a0 = np.where((active & ~self._active)[:, None], a_p2g, self._a)
-        a0 *= active[:, None] & free
-        v0 = (mv * inv_m[:, None] + shift * dt * (a0 - a_p2g)) * free
+        a0 = ma * inv_m[:, None] * free
+        v0 = mv * inv_m[:, None] * free
         T["solve"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
         f += sim.external_force(sim.t, m, active=active)
-        fr = sim.boundary_force(v0)
+        fr = self._boundary_force(sim, v0 - shift * dt * a0, shift * dt)
         if fr is not None:
             f += fr
         t1 = time.perf_counter()
@@ -194,7 +232,6 @@ class ExplicitGeneralizedAlpha:
         sim.commit(sim._dF)
         if sim.robin is not None:
             sim.robin_u += du
-        self._a, self._active = a1, active
         sim.nodal = dict(mass=m, velocity=v1, active=active)
 
 
