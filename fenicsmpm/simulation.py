@@ -562,6 +562,11 @@ class Simulation:
             e.update(external_work=float(w[0]), boundary_work=float(w[1]))
         return e
 
+    @property
+    def monitoring_work(self):
+        """Whether `monitor_energy` asked the integrator to record the work of the forces."""
+        return self._work is not None
+
     def record_work(self, f_ext, f_boundary, v_start, v_end, dt):
         """Integrators call this once per step when the energy is monitored: the work of the
         nodal external and boundary forces over the step, dt f . (v_start + v_end) / 2, summed
@@ -577,7 +582,7 @@ class Simulation:
     def monitor_energy(self, every=10, tolerance=0.02, path=None):
         """Track the energy balance E_kin + E_strain - W_ext - W_boundary = E_0 every `every`
         steps (history in `energy_history`, CSV at `path`) and warn, once, when its error
-        exceeds `tolerance` times the largest energy seen. Only the explicit integrators record
+        exceeds `tolerance` times the largest energy seen. fm.Explicit and fm.Newmark record
         the external and boundary work; other integrators raise a ValueError here."""
         if not getattr(self.integrator, "records_work", False):
             raise ValueError(f"monitor_energy: {type(self.integrator).__name__} does not record "

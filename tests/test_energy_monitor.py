@@ -57,6 +57,23 @@ def test_monitor_warns_and_refuses():
     else:
         sim.run(steps=5)
     with pytest.raises(ValueError, match="does not record"):
-        vibrating_bar(fm.Newmark(), n_cells=8)[0].monitor_energy()
+        vibrating_bar(fm.ImplicitGeneralizedAlpha(), n_cells=8)[0].monitor_energy()
     with pytest.raises(ValueError, match="every"):
         vibrating_bar(fm.Explicit(), n_cells=8)[0].monitor_energy(every=0)
+
+
+def test_newmark_energy_balance():
+    """Newmark records the trapezoidal work (f^n + f^{n+1})/2 . du: on the V1 bar at 5x the
+    critical step the balance holds within 0.5 % (measured 0.28 %); on W1 (dx = 1, H = 40,
+    dt = 5 ms) a viscous base takes out most of the load's work (measured W_b = -0.93 W_ext;
+    the rest of the 7 % balance error is Newmark/MPM dissipation of the sharp pulse)."""
+    sim, _ = vibrating_bar(fm.Newmark(), n_cells=20)
+    hist = sim.monitor_energy(every=1)
+    sim.run(steps=100)
+    assert max(abs(e["balance_error"]) for e in hist) < 0.005
+    sim, _ = absorbing_column(fm.Newmark(), base="viscous", dx=1.0, height=40.0)
+    hist = sim.monitor_energy(every=5, tolerance=0.2)
+    sim.run(t_end=1.2)
+    e = hist[-1]
+    assert -1.0 < e["boundary_work"] / e["external_work"] < -0.85
+    assert e["kinetic"] + e["strain"] < 0.01 * e["external_work"]

@@ -242,6 +242,8 @@ class ImplicitGeneralizedAlpha(Newmark):
     in generalized-midpoint form; smaller rho_inf damps the high frequencies more.
     Keyword arguments (rtol, utol, max_iter, flip, petsc_options, prefix) as for Newmark."""
 
+    records_work = False            # f_ext here carries alpha_f-weighted start forces
+
     def __init__(self, rho_inf=0.8, **kw):
         prm = implicit_parameters(_radius(rho_inf, "rho_inf", "ImplicitGeneralizedAlpha"))
         _Newton.__init__(self, **kw)

@@ -159,6 +159,7 @@ class Newmark(_Newton):
     alpha_m = alpha_f = 0 here; ImplicitGeneralizedAlpha sets them (module docstring)."""
 
     alpha_m = alpha_f = 0.0
+    records_work = True
 
     def __init__(self, beta=0.25, gamma=0.5, **kw):
         super().__init__(**kw)
@@ -214,6 +215,9 @@ class Newmark(_Newton):
         sim.timers["g2p"] += time.perf_counter() - t0
         sim.commit(sim._dF)
         sim.nodal["velocity"] = v1
+        if sim.monitoring_work:        # trapezoidal work: (f^n + f^{n+1}) / 2 . du, du = dt (v0 + v1) / 2
+            f_mid = 0.5 * (f_ext + sim.external_force(sim.t, m))
+            sim.record_work(f_mid, sim.boundary_force(v1), v0, v1, dt)
 
     def _start_force(self, sim, m, active, v0):
         """f(t^n) = f_ext(t^n) - f_int(sigma^n) + Robin and particle-layer forces of the
