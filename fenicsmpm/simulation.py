@@ -54,8 +54,8 @@ class Simulation:
     shape: the shape-function family, one of SHAPES: "mpm" (the Lagrange basis of the
     particle's cell), "ugimp"/"cpgimp" (kernels.gimp: structured quadrilateral/hexahedral
     grids), "cpdi1"/"cpdi2" (kernels.cpdi: any 2D P1/Q1 mesh). The wider families need, in
-    parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(), and an explicit
-    integrator (the implicit sparsity is the cell pattern)."""
+    parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(); implicit
+    integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings)."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
                  mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm",
@@ -122,10 +122,6 @@ class Simulation:
         self._inverted = np.zeros(0, dtype=np.int8)  # flagged by commit, reported by the guards
         if shape not in SHAPES:
             raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
-        if shape != "mpm" and not integrator.explicit:
-            raise NotImplementedError(f"Simulation: shape={shape!r} with the implicit integrator "
-                                      f"{type(integrator).__name__}: the matrix sparsity covers "
-                                      f"one cell only; use an explicit integrator")
         self.shape = shape
         self._wide = None                            # GIMP/CPDI evaluator; None for "mpm"
         if shape in ("ugimp", "cpgimp"):
@@ -392,10 +388,6 @@ class Simulation:
         p, g = self.particles, self.grid
         t0 = time.perf_counter()
         if self._wide is not None:
-            if not self.integrator.explicit:
-                raise NotImplementedError(f"shape={self.shape!r} with the implicit integrator "
-                                          f"{type(self.integrator).__name__}: the matrix sparsity "
-                                          f"covers one cell only; use an explicit integrator")
             self._wide.before_locate(self)
         p.cell, p.xi = g.locate(p.x, p.cell)
         ids, xs = p.send_to_owners()

@@ -14,7 +14,7 @@ Error norms (`errors`):
 
 Two ways to reach the static state:
   - implicit: fm.QuasiStatic(load_steps=40) (gravity ramped linearly over 40 load steps,
-    as AMPLE; standard "mpm" shapes only);
+    as AMPLE; every shape family: wide ones get a wider matrix pattern);
   - explicit (any shape family): `DampedExplicit`, an fm.Explicit whose particle velocities
     are multiplied by exp(-c dt) after every step (mass-proportional viscous damping,
     dv/dt = ... - c v), with gravity ramped by the seed-002 sine over T/2 (gravity_ramp=T);

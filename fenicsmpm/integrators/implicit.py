@@ -25,7 +25,7 @@ import numpy as np
 from ..boundaries import particle_layer as kl
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
-from .linear_system import DEFAULT_PREFIX, LinearSystem
+from .linear_system import DEFAULT_PREFIX, LinearSystem, stencil_rings
 
 
 class _Newton:
@@ -45,7 +45,9 @@ class _Newton:
         self.ksp_iterations = 0
 
     def setup(self, sim):
-        self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix)
+        shape = getattr(sim, "shape", "mpm")        # wide shapes: a pattern over cell rings
+        self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
+                                   rings=stencil_rings(sim), shape=shape)
 
     def _norm(self, sim, r):
         own = r[: sim.grid.n_owned_nodes]

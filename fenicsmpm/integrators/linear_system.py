@@ -6,8 +6,10 @@ import numpy as np
 import ufl
 from dolfinx import fem
 import dolfinx.fem.petsc
+from numba import njit
 from petsc4py import PETSc
 
+from ..kernels import shape as kt_shape
 from ..kernels import transfer as kt
 
 DEFAULT_PREFIX = "fenicsmpm_"
@@ -21,27 +23,40 @@ class LinearSystem:
     is dolfinx's), and every assembly is one `setValuesLocalCSR` call. Constrained dofs
     (Dirichlet or inactive nodes) get a unit diagonal and zero right-hand side.
 
+    rings > 1 (the wide shape families, see stencil_rings): the pattern is every node pair
+    joined by a chain of at most `rings` cells (ring_adjacency, a static superset of what the
+    particles couple), put into a dolfinx SparsityPattern on V's index map (ghost rows go to
+    their owners) and made a PETSc matrix by dolfinx.cpp.la.petsc.create_matrix; nodeptr/adj
+    are that local pattern. rings = 1 ("mpm") keeps the cell pattern above, unchanged.
+
     Solver options: PETSc options under `prefix` (default "fenicsmpm_"), e.g.
     `-fenicsmpm_ksp_type cg -fenicsmpm_pc_type gamg`, or the `petsc_options` dict. The default
     is a direct LU (MUMPS on several ranks)."""
 
-    def __init__(self, grid, petsc_options=None, prefix=DEFAULT_PREFIX):
+    def __init__(self, grid, petsc_options=None, prefix=DEFAULT_PREFIX, rings=1, shape="mpm"):
         self.grid = grid
         bs = self.bs = grid.gdim
-        cn = grid.cell_nodes.astype(np.int64)
-        nv = cn.shape[1]
-        rows = np.repeat(cn, nv, axis=1).ravel()
-        cols = np.tile(cn, (1, nv)).ravel()
-        key = np.unique(rows * grid.n_nodes + cols)
-        adj_rows = key // grid.n_nodes
-        self.adj = np.ascontiguousarray(key % grid.n_nodes, dtype=np.int64)
-        counts = np.bincount(adj_rows, minlength=grid.n_nodes)
-        self.nodeptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        if not (isinstance(rings, (int, np.integer)) and rings >= 1):
+            raise ValueError(f"LinearSystem: 'rings' must be a positive integer, got {rings!r}")
+        self.rings, self.shape = int(rings), shape
+        if self.rings == 1:
+            cn = grid.cell_nodes.astype(np.int64)
+            nv = cn.shape[1]
+            rows = np.repeat(cn, nv, axis=1).ravel()
+            cols = np.tile(cn, (1, nv)).ravel()
+            key = np.unique(rows * grid.n_nodes + cols)
+            adj_rows = key // grid.n_nodes
+            self.adj = np.ascontiguousarray(key % grid.n_nodes, dtype=np.int64)
+            counts = np.bincount(adj_rows, minlength=grid.n_nodes)
+            self.nodeptr = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+            u, w = ufl.TrialFunction(grid.V), ufl.TestFunction(grid.V)
+            self.A = dolfinx.fem.petsc.create_matrix(fem.form(ufl.inner(u, w) * ufl.dx))
+        else:
+            self.nodeptr, self.adj = ring_adjacency(grid, self.rings)
+            self.A = _pattern_matrix(grid, self.nodeptr, self.adj)
         self.indptr, self.indices = kt.scalar_csr(self.nodeptr, self.adj, bs)
         self.diag = kt.diagonal_slots(self.nodeptr, self.adj, bs)
         self.data = np.zeros(len(self.indices))
-        u, w = ufl.TrialFunction(grid.V), ufl.TestFunction(grid.V)
-        self.A = dolfinx.fem.petsc.create_matrix(fem.form(ufl.inner(u, w) * ufl.dx))
         self.b = fem.Function(grid.V)
         self.x = fem.Function(grid.V)
         self.n_owned_dofs = grid.n_owned_nodes * bs
@@ -74,9 +89,31 @@ class LinearSystem:
                              f"KSPSetFromOptions and PCSetFromOptions")
 
     def plan(self, nodes):
-        """Scatter plan of the current particle-node connectivity (once per step)."""
+        """Scatter plan of the current particle-node connectivity (once per step). With the
+        wide pattern (rings > 1) a node pair outside it raises RuntimeError on every rank
+        (collective), never a dropped or misplaced term."""
         plan = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int64)
-        kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
+        if self.rings == 1:
+            kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
+            return plan
+        miss = _checked_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
+        comm = self.grid.comm
+        if comm.size > 1:                           # collective: every rank raises together
+            from mpi4py import MPI
+            if comm.allreduce(int(miss >= 0), op=MPI.MAX) and miss < 0:
+                raise RuntimeError(f"implicit shape={self.shape!r}: a particle on another rank "
+                                   f"couples nodes outside the static matrix pattern (see its "
+                                   f"message)")
+        if miss >= 0:
+            p, a, b = miss // nodes.shape[1] ** 2, miss // nodes.shape[1] % nodes.shape[1], miss % nodes.shape[1]
+            xi, xj = self.grid.node_x[nodes[p, a]], self.grid.node_x[nodes[p, b]]
+            raise RuntimeError(
+                f"implicit shape={self.shape!r}: local particle {p} couples the nodes at "
+                f"{np.round(xi, 6).tolist()} and {np.round(xj, 6).tolist()}, which are more "
+                f"than {self.rings} cell rings apart: outside the static matrix pattern "
+                f"(its domain grew beyond what the pattern covers, e.g. a cpGIMP box stretched "
+                f"past |F_kk| l0 = L/2 or a CPDI domain larger than a cell). Refine the grid, "
+                f"use fewer particles per cell or shape='ugimp'/'cpdi1'; the term is not dropped")
         return plan
 
     def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained, extra=None):
@@ -121,6 +158,93 @@ class LinearSystem:
     def destroy(self):
         self.ksp.destroy()
         self.A.destroy()
+
+
+def stencil_rings(sim):
+    """Cell rings the implicit matrix pattern must span for the shape family of `sim`: node
+    pairs (i, j) are in the pattern when a chain of at most `rings` cells joins i to j, each
+    cell sharing a node with the next (rings = 1: one cell, dolfinx's pattern).
+
+    A particle's nodes lie in the cells its domain touches. uGIMP/cpGIMP on the lattice: a box
+    of half-width l (r = l / L per axis) touches the nodes closer than L + l, so two of its
+    nodes are at most ceil(2 r) + 1 lattice steps apart per axis, and one cell ring is one
+    step per axis: rings = ceil(2 r) + 1 (2 for r <= 1/2), r from the initial half-widths
+    (times |F_kk| for cpGIMP), the largest over all ranks. CPDI: the corners of a domain no
+    larger than a cell lie in the cells sharing a vertex with the particle's cell; two such
+    cells are joined through that cell, so rings = 3 in general (2 on a structured quad
+    lattice, where corners at most a cell apart lie in cells that share a vertex)."""
+    shape = getattr(sim, "shape", "mpm")
+    if shape == "mpm":
+        return 1
+    if shape in ("ugimp", "cpgimp"):
+        p, lat = sim.particles, sim._wide.lat
+        d = sim.gdim
+        r = p.gimp_l0 / lat["spacing"]
+        if shape == "cpgimp":
+            r = r * np.abs(np.diagonal(p.F, axis1=1, axis2=2)[:, :d])
+        rmax = float(r.max()) if r.size else 0.0
+        if sim.comm.size > 1:
+            from mpi4py import MPI
+            rmax = sim.comm.allreduce(rmax, op=MPI.MAX)
+        return int(np.ceil(2.0 * rmax - 1e-9)) + 1 if rmax > 0 else 2
+    if shape in ("cpdi1", "cpdi2"):
+        g = sim.grid
+        return 2 if g.structured and g.kind == kt_shape.TENSOR else 3
+    raise ValueError(f"stencil_rings: unknown shape family {shape!r}")
+
+
+def ring_adjacency(grid, rings):
+    """(nodeptr, adj): for every local node (owned and ghost) the sorted local nodes joined to
+    it by a chain of at most `rings` local cells (owned and ghost), consecutive cells sharing
+    a node. Built as the Boolean power of the node-cell-node graph."""
+    import scipy.sparse as sp
+    nc, nv = grid.cell_nodes.shape
+    B = sp.csr_matrix((np.ones(nc * nv, dtype=np.int8), grid.cell_nodes.ravel(),
+                       np.arange(0, nc * nv + 1, nv)), shape=(nc, grid.n_nodes))
+    A1 = (B.T @ B).tocsr()
+    A1.data[:] = 1
+    A = A1
+    for _ in range(rings - 1):
+        A = (A @ A1).tocsr()
+        A.data[:] = 1                      # Boolean (no int8 overflow on the next product)
+    A.sort_indices()
+    return (np.ascontiguousarray(A.indptr, dtype=np.int64),
+            np.ascontiguousarray(A.indices, dtype=np.int64))
+
+
+def _pattern_matrix(grid, nodeptr, adj):
+    """PETSc AIJ matrix (block size gdim) with the node pattern (nodeptr, adj) of local rows
+    (owned and ghost): a dolfinx SparsityPattern on V's index map, ghost rows sent to their
+    owners by assemble(), so every rank's owned rows hold the pairs any rank couples."""
+    from dolfinx import cpp
+    imap = grid.V.dofmap.index_map
+    bs = grid.V.dofmap.index_map_bs
+    pattern = cpp.la.SparsityPattern(grid.comm, [imap, imap], [bs, bs])
+    adj32 = adj.astype(np.int32)
+    for i in range(len(nodeptr) - 1):
+        pattern.insert(np.array([i], dtype=np.int32), adj32[nodeptr[i]:nodeptr[i + 1]])
+    pattern.assemble()
+    A = cpp.la.petsc.create_matrix(grid.comm, pattern)
+    A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
+    return A
+
+
+@njit(cache=True)
+def _checked_plan(nodes, nodeptr, adj, bs, plan_out):
+    """kernels.transfer.stiffness_plan that reports the first missing pair (flat index
+    p * nv * nv + a * nv + b) instead of writing a wrong offset; -1 when all are present."""
+    nv = nodes.shape[1]
+    for p in range(nodes.shape[0]):
+        for a in range(nv):
+            i = nodes[p, a]
+            lo, hi = nodeptr[i], nodeptr[i + 1]
+            for b in range(nv):
+                j = nodes[p, b]
+                k = np.searchsorted(adj[lo:hi], j)
+                if k >= hi - lo or adj[lo + k] != j:
+                    return (p * nv + a) * nv + b
+                plan_out[p, a, b] = lo * bs * bs + k * bs
+    return -1
 
 
 def _insert_command_line_options(prefix, argv=None):
