@@ -20,19 +20,10 @@ import numba
 import numpy as np
 
 from .linear_elastic import IsotropicElasticParameters
+from .neo_hookean import _current_F
 from .piola import det3, inv3
 
 __all__ = ["Hencky", "hencky_stress_kernel", "hencky_tangent_kernel"]
-
-
-@numba.njit(cache=True)
-def _current_F(dF, F_old, p, F):
-    for i in range(3):
-        for j in range(3):
-            s = 0.0
-            for m in range(3):
-                s += dF[p, i, m] * F_old[p, m, j]
-            F[i, j] = s
 
 
 @numba.njit(cache=True)
