@@ -20,7 +20,7 @@ from .kernels import shape as ks
 from .kernels import transfer as kt
 
 LEAVE_POLICIES = ("error", "remove", "periodic")
-SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2")
+SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss")
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
                 "acceleration": "a"}
 
@@ -53,7 +53,9 @@ class Simulation:
     particle stress; the constitutive update still acts on the particle stress.
     shape: the shape-function family, one of SHAPES: "mpm" (the Lagrange basis of the
     particle's cell), "ugimp"/"cpgimp" (kernels.gimp: structured quadrilateral/hexahedral
-    grids), "cpdi1"/"cpdi2" (kernels.cpdi: any 2D P1/Q1 mesh). The wider families need, in
+    grids), "cpdi1"/"cpdi2" (kernels.cpdi: any 2D P1/Q1 mesh), "gauss" (kernels.gauss_gimp:
+    deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
+    P1/Q1 mesh). The wider families need, in
     parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(); implicit
     integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings)."""
 
@@ -130,6 +132,9 @@ class Simulation:
         elif shape in ("cpdi1", "cpdi2"):
             from .kernels.cpdi import CpdiShape
             self._wide = CpdiShape(self, version=int(shape[-1]))
+        elif shape == "gauss":
+            from .kernels.gauss_gimp import GaussGimpShape
+            self._wide = GaussGimpShape(self)
         integrator.setup(self)
 
     @property

@@ -11,7 +11,7 @@ Configurations (one technique changed at a time against the baseline "MUSL mpm";
 brackets):
   MUSL mpm (baseline), USF, USL, AVG (seed 002 §4.4 half-step order)       [update order]
   GA rho_b=1, 0.8, 0.5 (fm.ExplicitGeneralizedAlpha; quick: 0.8 only)    [update order]
-  MUSL cpgimp, MUSL cpdi2 (baselines GIMP and CPDI; full: also ugimp, cpdi1) [shape]
+  MUSL cpgimp, MUSL cpdi2 (baselines GIMP and CPDI; full: also ugimp, cpdi1, gauss) [shape]
   MUSL mpm + split (sim.enable_splitting(2, 0.5, 1), seed 002 §3.4)        [splitting]
   MUSL mpm + smoothed (stress_feedback="smoothed", seed 002 eqs 4.18-4.19)   [stress feedback]
 
@@ -102,7 +102,7 @@ def configurations(quick=False):
     c += [_cfg(f"GA rho_b={r:g}", "update order", scheme="GA", rho_b=r)
           for r in ((0.8,) if quick else (1.0, 0.8, 0.5))]
     c += [_cfg(f"MUSL {s}", "shape", shape=s)
-          for s in (("cpgimp", "cpdi2") if quick else ("ugimp", "cpgimp", "cpdi1", "cpdi2"))]
+          for s in (("cpgimp", "cpdi2") if quick else ("ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss"))]
     c += [_cfg("MUSL mpm + split", "splitting", split=True)]
     c += [_cfg("MUSL mpm + smoothed", "stress feedback", smoothed=True)]
     return c

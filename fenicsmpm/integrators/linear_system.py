@@ -172,7 +172,9 @@ def stencil_rings(sim):
     (times |F_kk| for cpGIMP), the largest over all ranks. CPDI: the corners of a domain no
     larger than a cell lie in the cells sharing a vertex with the particle's cell; two such
     cells are joined through that cell, so rings = 3 in general (2 on a structured quad
-    lattice, where corners at most a cell apart lie in cells that share a vertex)."""
+    lattice, where corners at most a cell apart lie in cells that share a vertex). Gauss-GIMP
+    ("gauss"): its Gauss points lie inside the same pushed-forward voxel, so the CPDI bound
+    holds."""
     shape = getattr(sim, "shape", "mpm")
     if shape == "mpm":
         return 1
@@ -187,7 +189,7 @@ def stencil_rings(sim):
             from mpi4py import MPI
             rmax = sim.comm.allreduce(rmax, op=MPI.MAX)
         return int(np.ceil(2.0 * rmax - 1e-9)) + 1 if rmax > 0 else 2
-    if shape in ("cpdi1", "cpdi2"):
+    if shape in ("cpdi1", "cpdi2", "gauss"):
         g = sim.grid
         return 2 if g.structured and g.kind == kt_shape.TENSOR else 3
     raise ValueError(f"stencil_rings: unknown shape family {shape!r}")
