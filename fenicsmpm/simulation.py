@@ -447,7 +447,8 @@ class Simulation:
             mmax = self.comm.allreduce(mmax, op=MPI.MAX)
         active = m > self.mass_tolerance * mmax
         t0 = time.perf_counter()
-        kt.restrict_gradients(self.grid.D, self.nodes, self.N, self.dN, active)
+        kt.restrict_gradients(self.grid.D, self.nodes, self.N, self.dN, active[:, None],
+                              np.zeros(len(self.nodes), dtype=np.int64))
         self.timers["shape"] += time.perf_counter() - t0
         return active
 

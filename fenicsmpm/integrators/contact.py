@@ -64,6 +64,7 @@ import time
 import numpy as np
 from numba import njit
 
+from ..kernels import transfer as kt
 from .explicit import SCHEMES
 
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
@@ -151,36 +152,6 @@ def internal_force_bodies(D, nodes, dN, body, V, stress, out):
                 for l in range(d):
                     s += stress[p, k, l] * dN[p, a, l]
                 out[i, b, k] -= V[p] * s
-
-
-@njit(cache=True)
-def restrict_gradients_bodies(D, nodes, N, dN, body, present):
-    """kernels.transfer.restrict_gradients with the nodes of the particle's own body:
-    G_ip = grad N_ip - N_ip sum_{a present} grad N_ap on nodes where the particle's body has
-    mass, 0 elsewhere (keeps sum_i G_ip = 0)."""
-    d = len(D)
-    s = np.empty(d)
-    for p in range(nodes.shape[0]):
-        b = body[p]
-        full = True
-        for a in range(nodes.shape[1]):
-            if not present[nodes[p, a], b]:
-                full = False
-        if full:
-            continue
-        for k in range(d):
-            s[k] = 0.0
-        for a in range(nodes.shape[1]):
-            if present[nodes[p, a], b]:
-                for k in range(d):
-                    s[k] += dN[p, a, k]
-        for a in range(nodes.shape[1]):
-            if present[nodes[p, a], b]:
-                for k in range(d):
-                    dN[p, a, k] -= N[p, a] * s[k]
-            else:
-                for k in range(d):
-                    dN[p, a, k] = 0.0
 
 
 @njit(cache=True)
@@ -526,7 +497,7 @@ class ExplicitContact:
             from mpi4py import MPI
             mtol = sim.comm.allreduce(mtol, op=MPI.MAX)
         present = m_b > mtol
-        restrict_gradients_bodies(D, sim.nodes, sim.N, sim.dN, body, present)
+        kt.restrict_gradients(D, sim.nodes, sim.N, sim.dN, present, body)   # per body
         self._present, self._m_b, self._gm_b = present, m_b, gm_b
         t0 = time.perf_counter()
         inv_mb = np.divide(1.0, m_b, out=np.zeros_like(m_b), where=present)

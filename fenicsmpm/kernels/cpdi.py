@@ -196,7 +196,6 @@ class CpdiShape:
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
         particle's corners reach (padded)."""
-        from . import shape as ks
         p, g = sim.particles, sim.grid
         n, nvc = len(p), g.cell_nodes.shape[1]
         if self.version == 2:
@@ -204,20 +203,7 @@ class CpdiShape:
         else:
             corners = np.empty((n, N_CORNERS, 2))
             cpdi1_corners(p.x, p.F, p.cpdi_r0, corners)
-        flat = corners.reshape(-1, 2)
-        hint = np.repeat(p.cell, N_CORNERS)
-        cells, xi = g.locate(flat, hint)
-        lost = np.flatnonzero(cells < 0)
-        if len(lost):
-            cells[lost] = hint[lost]
-            xl = np.empty((len(lost), 2))
-            ks.pull_back(g.kind, np.ascontiguousarray(flat[lost]), cells[lost], g.cell_nodes,
-                         g.node_x, g.affine_Jinv, xl, np.empty(len(lost), dtype=np.bool_))
-            xi[lost] = xl
-        cnodes = np.empty((n * N_CORNERS, nvc), dtype=np.int32)
-        cN = np.empty((n * N_CORNERS, nvc))
-        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
-                     g.affine_Jinv, cnodes, cN, np.empty((n * N_CORNERS, nvc, 2)))
+        cnodes, cN, _ = shape_at_points(g, corners, p.cell)
         cnodes = cnodes.reshape(n, N_CORNERS, nvc)
         cN = cN.reshape(n, N_CORNERS, nvc)
         w = np.empty((n, N_CORNERS))
@@ -234,6 +220,35 @@ class CpdiShape:
         count = np.empty(n, dtype=np.int64)
         cpdi_combine(g.D, cnodes, cN, w, gc, nodes, N, dN, count)
         self._corner_shape = (cnodes, cN)
-        nv = max(int(count.max()) if n else 1, 1)
-        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
-                np.ascontiguousarray(dN[:, :nv]))
+        return trim_stencil(nodes, N, dN, count)
+
+
+def shape_at_points(g, points, cells_hint):
+    """Standard-MPM (nodes, N, dN) at points (n, k, 2) of n particles, flattened to n k rows.
+    A point outside the local mesh uses its particle's cell (`cells_hint`), extended linearly."""
+    from . import shape as ks
+    n, k = points.shape[:2]
+    nvc = g.cell_nodes.shape[1]
+    flat = np.ascontiguousarray(points.reshape(-1, 2))
+    hint = np.repeat(cells_hint, k)
+    cells, xi = g.locate(flat, hint)
+    lost = np.flatnonzero(cells < 0)
+    if len(lost):
+        cells[lost] = hint[lost]
+        xl = np.empty((len(lost), 2))
+        ks.pull_back(g.kind, np.ascontiguousarray(flat[lost]), cells[lost], g.cell_nodes,
+                     g.node_x, g.affine_Jinv, xl, np.empty(len(lost), dtype=np.bool_))
+        xi[lost] = xl
+    nodes = np.empty((n * k, nvc), dtype=np.int32)
+    N = np.empty((n * k, nvc))
+    dN = np.empty((n * k, nvc, 2))
+    ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad, g.affine_Jinv,
+                 nodes, N, dN)
+    return nodes, N, dN
+
+
+def trim_stencil(nodes, N, dN, count):
+    """The combined stencil cut to the largest distinct-node count over particles (>= 1)."""
+    nv = max(int(count.max()) if len(count) else 1, 1)
+    return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
+            np.ascontiguousarray(dN[:, :nv]))

@@ -103,26 +103,12 @@ class GaussGimpShape:
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
         particle's Gauss points reach (padded)."""
-        from . import shape as ks
+        from .cpdi import shape_at_points, trim_stencil
         p, g = sim.particles, sim.grid
         n, nvc = len(p), g.cell_nodes.shape[1]
         pts = np.empty((n, N_GAUSS, 2))
         gauss_points(p.x, p.F, p.cpdi_r0, pts)
-        flat = pts.reshape(-1, 2)
-        hint = np.repeat(p.cell, N_GAUSS)
-        cells, xi = g.locate(flat, hint)
-        lost = np.flatnonzero(cells < 0)
-        if len(lost):
-            cells[lost] = hint[lost]
-            xl = np.empty((len(lost), 2))
-            ks.pull_back(g.kind, np.ascontiguousarray(flat[lost]), cells[lost], g.cell_nodes,
-                         g.node_x, g.affine_Jinv, xl, np.empty(len(lost), dtype=np.bool_))
-            xi[lost] = xl
-        gnodes = np.empty((n * N_GAUSS, nvc), dtype=np.int32)
-        gN = np.empty((n * N_GAUSS, nvc))
-        gdN = np.empty((n * N_GAUSS, nvc, 2))
-        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
-                     g.affine_Jinv, gnodes, gN, gdN)
+        gnodes, gN, gdN = shape_at_points(g, pts, p.cell)
         width = N_GAUSS * nvc
         nodes = np.empty((n, width), dtype=np.int32)
         N = np.empty((n, width))
@@ -130,6 +116,4 @@ class GaussGimpShape:
         count = np.empty(n, dtype=np.int64)
         gauss_combine(g.D, gnodes.reshape(n, N_GAUSS, nvc), gN.reshape(n, N_GAUSS, nvc),
                       gdN.reshape(n, N_GAUSS, nvc, 2), nodes, N, dN, count)
-        nv = max(int(count.max()) if n else 1, 1)
-        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
-                np.ascontiguousarray(dN[:, :nv]))
+        return trim_stencil(nodes, N, dN, count)

@@ -66,30 +66,32 @@ def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
 
 
 @njit(cache=True)
-def restrict_gradients(D, nodes, N, dN, active):
+def restrict_gradients(D, nodes, N, dN, active, field):
     """Gradients restricted to active nodes, keeping sum_i G_ip = 0 exactly:
         G_ip = grad N_ip - N_ip sum_{a active} grad N_ap  (active i),   G_ip = 0 (inactive i).
     Inactive nodes carry no mass, so N_ip ~ 0 there while grad N_ip is not: without this, a
     particle on a cell face (or next to an empty cell) sees a zero velocity at such a node and
     gets a spurious velocity gradient. G = grad N whenever all of a particle's nodes are
-    active. Applied in place to dN."""
+    active. `active` is (n_nodes, n_fields): particle p sees column field[p] (one column for
+    single-field MPM; one per body in multi-velocity contact). Applied in place to dN."""
     d = len(D)
     s = np.empty(d)
     for p in range(nodes.shape[0]):
+        f = field[p]
         full = True
         for a in range(nodes.shape[1]):
-            if not active[nodes[p, a]]:
+            if not active[nodes[p, a], f]:
                 full = False
         if full:
             continue
         for k in range(d):
             s[k] = 0.0
         for a in range(nodes.shape[1]):
-            if active[nodes[p, a]]:
+            if active[nodes[p, a], f]:
                 for k in range(d):
                     s[k] += dN[p, a, k]
         for a in range(nodes.shape[1]):
-            if active[nodes[p, a]]:
+            if active[nodes[p, a], f]:
                 for k in range(d):
                     dN[p, a, k] -= N[p, a] * s[k]
             else:

@@ -19,8 +19,7 @@ import math
 import numba
 import numpy as np
 
-from .linear_elastic import IsotropicElasticParameters
-from .neo_hookean import _current_F
+from .neo_hookean import IsotropicHyperelastic, _current_F
 from .piola import det3, inv3
 
 __all__ = ["Hencky", "hencky_stress_kernel", "hencky_tangent_kernel"]
@@ -168,7 +167,7 @@ def hencky_tangent_kernel(idx, dF, F_old, dsig, la, mu):
                         dsig[p, i, j, k, l] = dt / J - tau[i, j] / J * dFinv[l, k]
 
 
-class Hencky(IsotropicElasticParameters):
+class Hencky(IsotropicHyperelastic):
     """Hencky (logarithmic-strain) hyperelastic solid.
 
     sigma = (lambda tr(eps) I + 2 mu eps) / J,  eps = ln(b) / 2, b = F F^T, J = det F;
@@ -179,17 +178,5 @@ class Hencky(IsotropicElasticParameters):
     """
 
     name = "Hencky"
-    n_state = 0
-
-    def __init__(self, E, nu, density):
-        self._set_parameters(E, nu, density)
-
-    def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
-        """Write sigma_new[idx]; ``sigma_old`` and ``state`` are unused (hyperelastic)."""
-        hencky_stress_kernel(np.asarray(idx, dtype=np.int64), dF, F_old, sigma_new,
-                             self.lame_lambda, self.shear_modulus)
-
-    def tangent(self, idx, dF, F_old, sigma_old, sigma_new, state, dsig):
-        """Write dsig[idx] = d sigma_new / d dF (analytic, consistent with ``stress``)."""
-        hencky_tangent_kernel(np.asarray(idx, dtype=np.int64), dF, F_old, dsig,
-                              self.lame_lambda, self.shear_modulus)
+    stress_kernel = hencky_stress_kernel
+    tangent_kernel = hencky_tangent_kernel

@@ -100,7 +100,29 @@ def neo_hookean_tangent_kernel(idx, dF, F_old, dsig, lam, mu):
                         dsig[p, i, j, k, l] = v
 
 
-class NeoHookean(IsotropicElasticParameters):
+class IsotropicHyperelastic(IsotropicElasticParameters):
+    """Base of the isotropic hyperelastic materials: sigma depends on F = dF F_old only, through
+    the numba kernels `stress_kernel(idx, dF, F_old, sigma_new, lam, mu)` and
+    `tangent_kernel(idx, dF, F_old, dsig, lam, mu)` of the subclass. No history (n_state = 0);
+    particles with J <= 0 get NaN stress (no exception; the commit refuses such increments)."""
+
+    n_state = 0
+
+    def __init__(self, E, nu, density):
+        self._set_parameters(E, nu, density)
+
+    def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
+        """Write sigma_new[idx]; ``sigma_old`` and ``state`` are unused (hyperelastic)."""
+        type(self).stress_kernel(np.asarray(idx, dtype=np.int64), dF, F_old, sigma_new,
+                                 self.lame_lambda, self.shear_modulus)
+
+    def tangent(self, idx, dF, F_old, sigma_old, sigma_new, state, dsig):
+        """Write dsig[idx] = d sigma_new / d dF (analytic, consistent with ``stress``)."""
+        type(self).tangent_kernel(np.asarray(idx, dtype=np.int64), dF, F_old, dsig,
+                                  self.lame_lambda, self.shear_modulus)
+
+
+class NeoHookean(IsotropicHyperelastic):
     """Compressible neo-Hookean solid (Bonet & Wood 2008, eq. 6.29).
 
     sigma = (mu/J)(b - I) + (lambda ln J / J) I,  F = dF F_old, b = F F^T, J = det F;
@@ -111,17 +133,5 @@ class NeoHookean(IsotropicElasticParameters):
     """
 
     name = "NeoHookean"
-    n_state = 0
-
-    def __init__(self, E, nu, density):
-        self._set_parameters(E, nu, density)
-
-    def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
-        """Write sigma_new[idx]; ``sigma_old`` and ``state`` are unused (hyperelastic)."""
-        neo_hookean_stress_kernel(np.asarray(idx, dtype=np.int64), dF, F_old, sigma_new,
-                                  self.lame_lambda, self.shear_modulus)
-
-    def tangent(self, idx, dF, F_old, sigma_old, sigma_new, state, dsig):
-        """Write dsig[idx] = d sigma_new / d dF (analytic, consistent with ``stress``)."""
-        neo_hookean_tangent_kernel(np.asarray(idx, dtype=np.int64), dF, F_old, dsig,
-                                   self.lame_lambda, self.shear_modulus)
+    stress_kernel = neo_hookean_stress_kernel
+    tangent_kernel = neo_hookean_tangent_kernel
