@@ -318,9 +318,10 @@ class Simulation:
             self._layer_version = (p.version, len(p))
         return self._layer
 
-    def boundary_force(self, v_grid):
+    def boundary_force(self, v_grid, v_particles=None):
         """Robin (mesh facets) and particle-layer tractions of the start-of-step state with nodal
-        velocities v_grid, summed over ranks; None when there are no such boundaries."""
+        velocities v_grid and particle velocities v_particles (default p.v), summed over ranks;
+        None when there are no such boundaries."""
         if self.robin is None and not self.layers:
             return None
         p = self.particles
@@ -328,7 +329,7 @@ class Simulation:
         if self.robin is not None:
             self.robin.force(self.robin_u, v_grid, fr)
         if self.layers:
-            self.layer_force(p.u - p.layer_u0, p.v, fr)
+            self.layer_force(p.u - p.layer_u0, p.v if v_particles is None else v_particles, fr)
         self.grid.accumulate(fr)
         return fr
 

@@ -179,20 +179,6 @@ class ExplicitGeneralizedAlpha:
     def setup(self, sim):
         pass
 
-    @staticmethod
-    def _boundary_force(sim, v_grid, lag):
-        """sim.boundary_force with the dashpots at the transported velocity: Robin facets at
-        the nodal v_grid, particle layers at v_p - lag a_p (lag = (gamma - 1/2) dt)."""
-        if not sim.layers:
-            return sim.boundary_force(v_grid)
-        p = sim.particles
-        fr = np.zeros((sim.grid.n_nodes, sim.gdim))
-        if sim.robin is not None:
-            sim.robin.force(sim.robin_u, v_grid, fr)
-        sim.layer_force(p.u - p.layer_u0, p.v - lag * p.a, fr)
-        sim.grid.accumulate(fr)
-        return fr
-
     def step(self, sim, dt):
         p, grid, T, prm = sim.particles, sim.grid, sim.timers, self.params
         shift = prm.gamma - 0.5
@@ -214,7 +200,9 @@ class ExplicitGeneralizedAlpha:
         sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
         f += sim.external_force(sim.t, m, active=active)
-        fr = self._boundary_force(sim, v0 - shift * dt * a0, shift * dt)
+        # dashpots at the transported velocity (nodal and particle: v - (gamma - 1/2) dt a)
+        fr = sim.boundary_force(v0 - shift * dt * a0,
+                                p.v - shift * dt * p.a if sim.layers else None)
         if fr is not None:
             f += fr
         t1 = time.perf_counter()
