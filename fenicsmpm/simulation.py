@@ -19,6 +19,7 @@ from .io import ParticleWriter, Progress, ProbeWriter
 from .kernels import shape as ks
 from .kernels import transfer as kt
 
+FORCE_INTEGRATIONS = ("particles", "mixed")
 LEAVE_POLICIES = ("error", "remove", "periodic")
 SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss")
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
@@ -61,7 +62,8 @@ class Simulation:
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
                  mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm",
-                 stress_feedback=None, gravity_ramp=None):
+                 stress_feedback=None, gravity_ramp=None, force_integration="particles",
+                 axisymmetric=False):
         self.grid = grid
         self.particles = particles
         if not all(hasattr(integrator, a) for a in ("explicit", "setup", "step")):
@@ -115,6 +117,11 @@ class Simulation:
             raise NotImplementedError("Simulation: stress_feedback='smoothed' needs an explicit integrator")
         self.stress_feedback = stress_feedback
         self.gravity_ramp = _check_ramp(gravity_ramp, "Simulation")
+        if force_integration not in FORCE_INTEGRATIONS:
+            raise ValueError(f"Simulation: 'force_integration' must be one of {FORCE_INTEGRATIONS}, "
+                             f"got {force_integration!r}")
+        self.force_integration = force_integration
+        self.axisymmetric = bool(axisymmetric)
         self.removed_mass = 0.0
         self.removed_count = 0
         self.base_motion = None                      # boundaries.base_motion.RigidBase (relative frame)
@@ -503,9 +510,18 @@ class Simulation:
         self.locate_and_shape()
         return smoothed_stress(self, self.particles.stress)
 
+    def incremental_F(self, w, scale, out):
+        """dF_p = I + scale sum_i w_i (x) grad N_ip (kernels.transfer.incremental_F) for every
+        particle, into out (n, 3, 3)."""
+        kt.incremental_F(self.grid.D, self.nodes, self.dN, w, scale, out)
+
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
         p = self.particles
+        if self.force_integration == "mixed":
+            from .mixed_integration import internal_force as mixed_force
+            mixed_force(self, stress, out, volume)
+            return
         kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, p.V if volume is None else volume,
                      stress, np.zeros(self.gdim), out)
 

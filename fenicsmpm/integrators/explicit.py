@@ -49,7 +49,7 @@ class Explicit:
     def _stress_update(self, sim, v_grid, dt):
         dF = sim._dF
         t0 = time.perf_counter()
-        kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, v_grid, dt, dF)
+        sim.incremental_F(v_grid, dt, dF)
         sim.timers["constitutive"] += time.perf_counter() - t0
         sim.trial_stress(dF)
         sim.commit(dF)

@@ -214,7 +214,7 @@ class ExplicitGeneralizedAlpha:
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
-        kt.incremental_F(grid.D, sim.nodes, sim.dN, du, 1.0, sim._dF)
+        sim.incremental_F(du, 1.0, sim._dF)
         T["constitutive"] += time.perf_counter() - t3
         sim.trial_stress(sim._dF)
         sim.commit(sim._dF)

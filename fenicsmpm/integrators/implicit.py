@@ -49,6 +49,15 @@ class _Newton:
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape)
 
+    def strain_increment(self, sim, du):
+        """sim._dF <- I + sum_i du_i (x) grad N_ip (the step's incremental deformation gradient)."""
+        sim.incremental_F(du, 1.0, sim._dF)
+
+    def assemble_tangent(self, sim, A4, plan, diag_add, constrained, extra=None):
+        """K = sum_p V_p B^T A_p B + diag(diag_add) (+ extra terms) into the PETSc matrix."""
+        self.system.assemble(sim.nodes, sim.dN, sim.particles.V, A4, plan, diag_add, constrained,
+                             extra)
+
     def _norm(self, sim, r):
         own = r[: sim.grid.n_owned_nodes]
         s = float(np.sum(own * own))
@@ -84,7 +93,7 @@ class _Newton:
         dnorm = np.inf
         for it in range(self.max_iter + 1):
             t1 = time.perf_counter()
-            kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, du, 1.0, sim._dF)
+            self.strain_increment(sim, du)
             sig = sim.trial_stress(sim._dF)
             first_piola(idx, sim._dF, sim.dynamic_stress(sig), P)
             fint = np.zeros_like(du)
@@ -129,8 +138,7 @@ class _Newton:
                     kl.layer_tangent(sim.grid.D, sim.layer_particles(), sim.nodes, sim.N, p.F,
                                      p.layer_an0, p.layer_coef, c_v, plan, sys.nodeptr,
                                      constrained, data)
-            sys.assemble(sim.nodes, sim.dN, p.V, A4, plan, np.repeat(m, d) * m_coef, constrained,
-                         extra)
+            self.assemble_tangent(sim, A4, plan, np.repeat(m, d) * m_coef, constrained, extra)
             if robin is not None:
                 own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)
                 B = robin.tangent(sim.robin_u + du, velocity(du), c_v, own)
