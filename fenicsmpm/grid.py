@@ -27,10 +27,15 @@ class Grid:
     Attributes: `mesh`, `V` (vector Lagrange degree 1), `gdim`, `comm`, `n_nodes`
     (ghost-inclusive), `n_owned_nodes`, `node_x` (n_nodes, gdim), `cell_nodes`
     (n_cells, nodes_per_cell), `n_owned_cells`, `h` (smallest cell size, for the CFL
-    limit), `structured` (whether the O(1) locate path is used).
+    limit), `structured` (whether the O(1) locate path is used), `axisymmetric`.
+
+    axisymmetric=True (2D only) reads the mesh as a meridian plane (r, z) = (x[0], x[1]),
+    r >= 0, of a body of revolution (Sulsky & Schreyer 1996): particle volumes and masses are
+    per radian (V = r A), the hoop strain is u_r / r, and boundary forms are weighted by r
+    (fenicsmpm.axisymmetric).
     """
 
-    def __init__(self, mesh):
+    def __init__(self, mesh, axisymmetric=False):
         if not isinstance(mesh, dolfinx.mesh.Mesh):
             raise TypeError(f"Grid: 'mesh' must be a dolfinx.mesh.Mesh, got {type(mesh).__name__}")
         ct = mesh.topology.cell_type
@@ -68,6 +73,17 @@ class Grid:
         self._tree = None
         self._exchange = {}
         self.periodic = None     # boundaries.periodic.PeriodicTie, applied by accumulate
+        self.axisymmetric = bool(axisymmetric)
+        if self.axisymmetric:
+            if self.gdim != 2:
+                raise ValueError(f"Grid: axisymmetric=True needs a 2D (r, z) mesh, got gdim={self.gdim}")
+            rmin = float(self.node_x[:, 0].min()) if self.n_nodes else np.inf
+            if self.comm.size > 1:
+                from mpi4py import MPI
+                rmin = self.comm.allreduce(rmin, op=MPI.MIN)
+            if rmin < -1e-12 * max(1.0, self.h):
+                raise ValueError(f"Grid: axisymmetric=True needs r = x[0] >= 0 everywhere, the mesh "
+                                 f"reaches r = {rmin:.6g}")
 
     # ------------------------------------------------------------------ geometry data
     def _affine_data(self):

@@ -7,6 +7,7 @@ integrates the cell volume exactly.
 """
 import numpy as np
 
+from .axisymmetric import check_radius
 from .kernels import shape as ks
 
 # name -> (trailing shape as a function of gdim, dtype)
@@ -120,7 +121,8 @@ class Particles:
 
     @classmethod
     def from_points(cls, grid, material, x, volume, velocity=None):
-        """Particles at given points (n, gdim) with given volumes (scalar or (n,))."""
+        """Particles at given points (n, gdim) with given volumes (scalar or (n,); meridian
+        areas on an axisymmetric grid)."""
         _check_material(material)
         x = np.ascontiguousarray(np.atleast_2d(np.asarray(x, dtype=np.float64)))
         if x.shape[1] != grid.gdim:
@@ -141,7 +143,12 @@ class Particles:
 
     @classmethod
     def _create(cls, grid, material, x, vol, cells, xi, velocity):
+        """vol is the cell-measure share of each point; on an axisymmetric grid it is a
+        meridian area and the volume per radian is r vol (fenicsmpm.axisymmetric)."""
         n = len(x)
+        if grid.axisymmetric:
+            check_radius(x, "Particles")
+            vol = vol * x[:, 0]
         v = np.zeros((n, grid.gdim))
         if velocity is not None:
             v[:] = velocity(x) if callable(velocity) else np.asarray(velocity, dtype=np.float64)

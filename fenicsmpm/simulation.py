@@ -8,6 +8,7 @@ import warnings
 
 import numpy as np
 
+from . import axisymmetric as axi
 from .boundaries import ParticleLayer, Robin, RobinForms, Traction, TractionForms, fixed_dofs
 from .boundaries import particle_layer as kl
 from .boundaries.friction import FrictionalBoundary
@@ -58,12 +59,16 @@ class Simulation:
     deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
     P1/Q1 mesh). The wider families need, in
     parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(); implicit
-    integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings)."""
+    integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings).
+    force_integration: "particles" (the internal force as a particle sum), or "mixed" (MPM
+    with Gauss-point integration of the internal force, fenicsmpm.mixed_integration).
+    Axisymmetric analysis is a property of the grid (fm.Grid(mesh, axisymmetric=True),
+    fenicsmpm.axisymmetric): hoop terms are added to the strain, force and tangent, and the
+    radial displacement of nodes on the axis r = 0 is fixed."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
                  mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm",
-                 stress_feedback=None, gravity_ramp=None, force_integration="particles",
-                 axisymmetric=False):
+                 stress_feedback=None, gravity_ramp=None, force_integration="particles"):
         self.grid = grid
         self.particles = particles
         if not all(hasattr(integrator, a) for a in ("explicit", "setup", "step")):
@@ -87,6 +92,8 @@ class Simulation:
         self.t = 0.0
         self.step_count = 0
         self.fixed = np.zeros((grid.n_nodes, d), dtype=bool)
+        if grid.axisymmetric:                        # symmetry axis: u_r = 0 at r = 0
+            self.fixed[:, 0] = np.abs(grid.node_x[:, 0]) <= 1e-9 * grid.h
         self.tractions = []
         self._traction_forms = None
         self._warned_traction = False
@@ -120,8 +127,14 @@ class Simulation:
         if force_integration not in FORCE_INTEGRATIONS:
             raise ValueError(f"Simulation: 'force_integration' must be one of {FORCE_INTEGRATIONS}, "
                              f"got {force_integration!r}")
+        if force_integration == "mixed" and shape != "mpm":
+            raise NotImplementedError(f"Simulation: force_integration='mixed' needs shape='mpm', got {shape!r}")
         self.force_integration = force_integration
-        self.axisymmetric = bool(axisymmetric)
+        self.axisymmetric = grid.axisymmetric
+        if self.axisymmetric and (shape not in ("mpm", "ugimp", "cpgimp") or force_integration != "particles"):
+            raise NotImplementedError(f"Simulation: axisymmetric grids support shape 'mpm', 'ugimp' "
+                                      f"and 'cpgimp' with particle integration, got shape={shape!r}, "
+                                      f"force_integration={force_integration!r}")
         self.removed_mass = 0.0
         self.removed_count = 0
         self.base_motion = None                      # boundaries.base_motion.RigidBase (relative frame)
@@ -297,6 +310,9 @@ class Simulation:
         facets, or an fm.ParticleLayer (the law on a layer of particles). Its displacement u
         is measured from the time it is added. Mesh forms are compiled once, at the next step."""
         if isinstance(boundary, ParticleLayer):
+            if self.axisymmetric:
+                raise NotImplementedError("add_boundary: particle-layer boundaries are not "
+                                          "implemented on axisymmetric grids; use a mesh boundary")
             boundary.attach(self.particles)
             self.layers.append(boundary)
             self._layer_version = None
@@ -407,6 +423,8 @@ class Simulation:
         if len(ids):
             self._particles_left(ids, xs)
         cells, xi = p.cell, p.xi
+        if self.axisymmetric:
+            self._r = p.x[:, 0].copy()        # start-of-step radius (the step's reference)
         t1 = time.perf_counter()
         n, nv = len(p), g.cell_nodes.shape[1]
         if n != self._n_alloc:
@@ -512,8 +530,10 @@ class Simulation:
 
     def incremental_F(self, w, scale, out):
         """dF_p = I + scale sum_i w_i (x) grad N_ip (kernels.transfer.incremental_F) for every
-        particle, into out (n, 3, 3)."""
+        particle, into out (n, 3, 3); axisymmetric grids add the hoop stretch."""
         kt.incremental_F(self.grid.D, self.nodes, self.dN, w, scale, out)
+        if self.axisymmetric:
+            axi.hoop_strain(self.nodes, self.N, w, scale, self._r, out)
 
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
@@ -522,8 +542,10 @@ class Simulation:
             from .mixed_integration import internal_force as mixed_force
             mixed_force(self, stress, out, volume)
             return
-        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, p.V if volume is None else volume,
-                     stress, np.zeros(self.gdim), out)
+        V = p.V if volume is None else volume
+        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, V, stress, np.zeros(self.gdim), out)
+        if self.axisymmetric:
+            axi.hoop_force(self.nodes, self.N, V, stress, self._r, out)
 
     def material_groups(self):
         """(material, particle indices) per material present."""

@@ -2,7 +2,7 @@
 boundary displacement u, velocity v and the facet normal n (seed 000 method 1, "mesh
 boundary").
 
-    L(w) = sum_k int_{Gamma_k} t_k(u, v, n) . w ds
+    L(w) = sum_k int_{Gamma_k} t_k(u, v, n) . w ds      (times r on axisymmetric grids)
 
 is assembled by dolfinx into nodal forces. For implicit runs the tangent comes from UFL:
     dL = derivative(L, u)[du] + c_v derivative(L, v)[du],   c_v = dv/du (gamma/(beta dt) for
@@ -24,6 +24,8 @@ import ufl
 from dolfinx import fem, mesh as dmesh
 import dolfinx.fem.petsc
 from petsc4py import PETSc
+
+from ..axisymmetric import radius_weight
 
 SPRINGS = ("deeks-randolph", "kellezi", "virtual-layer")
 
@@ -164,7 +166,8 @@ class RobinForms:
         self.v = fem.Function(grid.V)          # boundary velocity
         w = ufl.TestFunction(grid.V)
         nrm = ufl.FacetNormal(msh)
-        L = sum(ufl.inner(bc.bind(materials)(self.u, self.v, nrm), w) * ds(k + 1)
+        r = radius_weight(grid)                   # r on axisymmetric grids
+        L = sum(r * ufl.inner(bc.bind(materials)(self.u, self.v, nrm), w) * ds(k + 1)
                 for k, bc in enumerate(boundaries))
         # a law that is identically zero (e.g. a = b = 0) leaves an empty form: no force
         L = ufl.algorithms.expand_derivatives(L)

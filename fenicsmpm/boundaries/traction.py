@@ -1,12 +1,14 @@
 """Tractions on mesh facets as UFL `ds` forms on tagged facets (assembled by dolfinx).
 
 All tractions of a simulation share one compiled linear form
-    L(w) = sum_k inner(t_k(t), w) ds(k),
+    L(w) = sum_k inner(t_k(t), w) ds(k)      (times r on axisymmetric grids),
 whose constants t_k are updated every step; it is built only if a traction was added."""
 import numpy as np
 import ufl
 from dolfinx import fem, mesh as dmesh
 from petsc4py import PETSc
+
+from ..axisymmetric import radius_weight
 
 
 class Traction:
@@ -50,7 +52,8 @@ class TractionForms:
         w = ufl.TestFunction(grid.V)
         self.tractions = tractions
         self.constants = [fem.Constant(msh, PETSc.ScalarType((0.0,) * gdim)) for _ in tractions]
-        self.form = fem.form(sum(ufl.inner(c, w) * ds(k + 1) for k, c in enumerate(self.constants)))
+        r = radius_weight(grid)                   # r on axisymmetric grids
+        self.form = fem.form(sum(r * ufl.inner(c, w) * ds(k + 1) for k, c in enumerate(self.constants)))
         self.gdim = gdim
         self._buf = np.zeros(grid.n_nodes * gdim)
 

@@ -22,6 +22,7 @@ import time
 
 import numpy as np
 
+from .. import axisymmetric as axi
 from ..boundaries import particle_layer as kl
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
@@ -54,7 +55,14 @@ class _Newton:
         sim.incremental_F(du, 1.0, sim._dF)
 
     def assemble_tangent(self, sim, A4, plan, diag_add, constrained, extra=None):
-        """K = sum_p V_p B^T A_p B + diag(diag_add) (+ extra terms) into the PETSc matrix."""
+        """K = sum_p V_p B^T A_p B + diag(diag_add) (+ extra terms, + the hoop terms of
+        fenicsmpm.axisymmetric) into the PETSc matrix."""
+        if sim.axisymmetric:
+            def extra(data, more=extra):
+                axi.hoop_stiffness(sim.nodes, sim.N, sim.dN, sim.particles.V, A4, sim._r, plan,
+                                   self.system.nodeptr, constrained, data)
+                if more is not None:
+                    more(data)
         self.system.assemble(sim.nodes, sim.dN, sim.particles.V, A4, plan, diag_add, constrained,
                              extra)
 

@@ -25,6 +25,8 @@ l_p,k = l_p,k^0 |F_kk| (the box follows the stretch along each axis).
 import numpy as np
 from numba import njit
 
+from ..axisymmetric import meridian_area
+
 
 @njit(cache=True)
 def _phi(s, L):
@@ -181,9 +183,9 @@ def lattice(grid):
 def initial_half_widths(grid, particles, lat):
     """l_p^0 per axis from the particle volume: a box of the cell's aspect ratio and volume
     V0_p, l_k = (L_k / 2) (V0_p / prod L)^(1/d); for Particles.fill with n per direction this
-    is L_k / (2 n), the fill spacing."""
+    is L_k / (2 n), the fill spacing. Axisymmetric grids use the meridian area V0 / r0."""
     L = lat["spacing"]
-    s = (particles.V0 / np.prod(L)) ** (1.0 / grid.gdim)
+    s = (meridian_area(grid, particles.x - particles.u, particles.V0) / np.prod(L)) ** (1.0 / grid.gdim)
     return np.ascontiguousarray(0.5 * s[:, None] * L[None, :])
 
 
