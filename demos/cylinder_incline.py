@@ -12,8 +12,10 @@ The centre displacement (mass-weighted mean of the cylinder's particles) is plot
 the rigid-cylinder x(t) for:
     multi-velocity        fm.ExplicitContact (seed 004 eqs 2.34-2.39, with the gap check),
     multi-velocity-nogap  the same without the gap check (the seed's plain algorithm),
+    penalty               fm.ExplicitContact(algorithm="penalty"): node-to-segment penalty
+                          contact between the cylinder's circle and the plane's top edge
+                          (seed 004 eqs 2.40-2.53; polylines of 0.1 m segments),
     single-field          fm.Explicit: one velocity field, the cylinder is glued to the plane.
-(Penalty node-to-segment contact, seed 004 eqs 2.40-2.53, is not implemented yet.)
 Scene: fenicsmpm.bench.contact.incline; grid h = 0.4 m (the benchmark's), and also
 h = 0.2 m unless --quick.
 
@@ -56,7 +58,7 @@ def main():
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(12, 4.5))
     colors = {"multi-velocity": "tab:blue", "multi-velocity-nogap": "tab:green",
-              "single-field": "tab:red"}
+              "penalty": "tab:purple", "single-field": "tab:red"}
     styles = {0.4: "-", 0.2: "--"}
     cols, data = [], []
     for ax, (case, (theta, mu)) in zip(axes, CASES.items()):

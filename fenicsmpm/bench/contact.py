@@ -16,8 +16,12 @@ x is the mass-weighted mean x displacement of the cylinder's particles.
 
 Algorithms: "multi-velocity" (fm.ExplicitContact, seed 004 eqs 2.34-2.39, mass-gradient
 normals of the master body, with the gap check), "multi-velocity-nogap" (the same without
-the gap check: the seed's plain algorithm, contact from the moment two bodies share a node)
-and "single-field" (fm.Explicit: the bodies share one velocity field and stick together).
+the gap check: the seed's plain algorithm, contact from the moment two bodies share a node),
+"penalty" (fm.ExplicitContact(algorithm="penalty"), node-to-segment penalty contact, seed 004
+eqs 2.40-2.53: the cylinder's circle and the plane's top edge as polylines of 0.1 m segments
+(the seed's), k_n = k_t = (K + 4G/3)/h of the cylinder, so the penalty step limit is the
+cylinder's h / c_p) and "single-field" (fm.Explicit: the bodies share one velocity field and
+stick together).
 Metrics per run: x_end, x_exact, error (relative, at t_end), wall_s (the time loop, after
 JIT warm-up in a first throw-away run)."""
 import math
@@ -31,8 +35,10 @@ CASE = "contact"
 R, PLANE_T, G = 1.6, 0.8, 10.0
 K_CYL, G_CYL, RHO = 6e6, 3e6, 1000.0
 CASES = {"rolling": (45.0, 0.495), "slipping": (60.0, 2.0 / 7.0)}
-ALGORITHMS = ("multi-velocity", "multi-velocity-nogap", "single-field")
-CONTACT_OPTIONS = {"multi-velocity": {}, "multi-velocity-nogap": dict(gap=None)}
+ALGORITHMS = ("multi-velocity", "multi-velocity-nogap", "penalty", "single-field")
+CONTACT_OPTIONS = {"multi-velocity": {}, "multi-velocity-nogap": dict(gap=None),
+                   "penalty": dict(algorithm="penalty")}
+SEGMENT = 0.1                   # polyline segment length (the seed's 0.1 m)
 
 
 def exact_x(theta_deg, mu, t):
@@ -72,7 +78,14 @@ def incline(theta_deg, mu, algorithm="multi-velocity", h=0.4, ppc=2, t_end=1.0, 
     p = cyl + plane                              # material_id 0: cylinder, 1: plane (the bodies)
     th = math.radians(theta_deg)
     if algorithm in CONTACT_OPTIONS:
-        integ = fm.ExplicitContact(scheme, mu=mu, **{**CONTACT_OPTIONS[algorithm], **contact})
+        opts = {**CONTACT_OPTIONS[algorithm], **contact}
+        if algorithm == "penalty":
+            opts.setdefault("penalty", dict(k_n=(K_CYL + 4 * G_CYL / 3) / h))
+        integ = fm.ExplicitContact(scheme, mu=mu, **opts)
+        if algorithm == "penalty":
+            from ..integrators.penalty_contact import circle, line
+            integ.add_polyline(0, circle((xc, yc), R, round(2 * math.pi * R / SEGMENT)), closed=True)
+            integ.add_polyline(1, line((L, PLANE_T), (0.0, PLANE_T), round(L / SEGMENT)))
     elif algorithm == "single-field":
         integ = fm.Explicit(scheme)
     else:
@@ -122,6 +135,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, cells=None, t
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     incline(45.0, 0.495, "multi-velocity", h=0.8, t_end=0.01, comm=comm)   # JIT warm-up
     incline(45.0, 0.495, "single-field", h=0.8, t_end=0.01, comm=comm)
+    incline(45.0, 0.495, "penalty", h=0.8, t_end=0.01, comm=comm)
     runs, series = [], {}
     for case, (theta, mu) in CASES.items():
         for alg in ALGORITHMS:
@@ -143,8 +157,8 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, cells=None, t
     doc = common.result(CASE, runs, comm, quick=quick,
                         notes=["Incline tilted through gravity; single-field MPM glues the "
                                "cylinder to the plane (error reported, not a target).",
-                               "Penalty node-to-segment contact (seed 004 eqs 2.40-2.53) is "
-                               "not implemented yet: no runs."])
+                               "Penalty: polylines of 0.1 m segments, k_n = k_t = (K + 4G/3)/h "
+                               "of the cylinder."])
     common.write_result(doc, out, comm)
     common.print_table([dict(name=r["name"], h=r["config"]["h"], x=r["metrics"]["x_end"],
                              exact=r["metrics"]["x_exact"], err=r["metrics"]["error"],
@@ -152,7 +166,8 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, cells=None, t
                        [("run", "name"), ("h", "h"), ("x(t_end)", "x"), ("exact", "exact"),
                         ("rel. error", "err"), ("wall s", "wall")], comm=comm)
     fig, ax = common.new_figure(2, 1)
-    colors = {"multi-velocity": "tab:blue", "multi-velocity-nogap": "tab:green", "single-field": "tab:red"}
+    colors = {"multi-velocity": "tab:blue", "multi-velocity-nogap": "tab:green",
+              "penalty": "tab:purple", "single-field": "tab:red"}
     for r in runs:
         c = r["config"]
         k = list(CASES).index(c["case"])

@@ -1,5 +1,6 @@
 """Explicit MPM with one velocity field per body: multi-velocity frictional contact
-(Bardenhagen et al. 2000/2001; seed 004 §2.6.2, eqs 2.34-2.39) and rigid bodies with
+(Bardenhagen et al. 2000/2001; seed 004 §2.6.2, eqs 2.34-2.39), penalty node-to-segment
+contact (seed 004 eqs 2.40-2.53, integrators.penalty_contact) and rigid bodies with
 prescribed motion.
 
 Bodies. A particle's body is the optional particle field `body` (int32; set it with
@@ -55,10 +56,19 @@ Their particles move with that velocity (no stress update), their nodal velocity
 prescribed one, and at a node they share with deformable bodies v^cm is the rigid
 velocity (the rigid body has infinite inertia).
 
+Penalty contact (algorithm="penalty", 2D; seed 004 eqs 2.40-2.53; integrators.penalty_contact
+has the equations, the sign convention g_n < 0 = penetration, the Coulomb cap |f_t| <= mu f_n
+with f_n >= 0 compressive, the MPI scheme and the stability limit): every body needs a
+boundary polyline, `add_polyline(body, vertices, closed=False)`; the vertices move with the
+body's grid velocity, node-to-segment penalty forces (k_n, k_t: `penalty=dict(k_n=..., k_t=...)`,
+k_t = k_n by default) between the bodies' polylines are mapped to each body's nodes as
+external forces before the trial velocities, and the nodal projection above is not applied.
+Rigid bodies' polylines move with their prescribed velocity. The per-body contact force is
+again `body_contact_force`, and `penalty_stats` holds the step's number of pairs, slipping
+pairs and largest penetration.
+
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field;
-Robin boundaries and particle layers are not supported by this integrator. The penalty
-node-to-segment algorithm of seed 004 (eqs 2.40-2.53) is not implemented: algorithm="penalty"
-is refused."""
+Robin boundaries and particle layers are not supported by this integrator."""
 import time
 
 import numpy as np
@@ -66,10 +76,11 @@ from numba import njit
 
 from ..kernels import transfer as kt
 from .explicit import SCHEMES
+from .penalty_contact import PenaltyContact, check_polyline
 
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
 
-ALGORITHMS = ("multi-velocity",)
+ALGORITHMS = ("multi-velocity", "penalty")
 NORMALS = ("average", "max-gradient")
 
 
@@ -334,7 +345,7 @@ def incremental_F_bodies(D, nodes, dN, body, rigid, w, scale, dF_out):
 # ---------------------------------------------------------------------------- integrator
 class ExplicitContact:
     """Explicit MPM (the update orders of fm.Explicit) with one velocity field per body and
-    multi-velocity frictional contact between them (module docstring).
+    multi-velocity or penalty frictional contact between them (module docstring).
 
     mu: Coulomb coefficient between every pair of bodies (>= 0; 0 is frictionless, a large
     value sticks without gluing: separation is still allowed), or a dict {(a, b): mu_ab}
@@ -342,6 +353,9 @@ class ExplicitContact:
     rigid: {body_id: velocity vector or t -> vector} for rigid bodies with prescribed motion.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
+    algorithm="penalty": penalty=dict(k_n=..., k_t=...) (> 0 and >= 0, force per unit length
+    per unit penetration/slip; k_t defaults to k_n; about (K + 4G/3)/h of the stiffer body),
+    and a polyline for every body (add_polyline); normal and gap are not used.
     Fields after each step: `body_contact_force` (nb, gdim), the global contact force on each
     body; `nodal` in the simulation holds the centre-of-mass nodal velocity."""
     explicit = True
@@ -349,7 +363,7 @@ class ExplicitContact:
     supports_friction = True            # frictional rigid boundaries act on every body's field
 
     def __init__(self, scheme="MUSL", mu=0.0, algorithm="multi-velocity", flip=1.0,
-                 rigid=None, mu_default=0.0, normal="max-gradient", gap=0.0):
+                 rigid=None, mu_default=0.0, normal="max-gradient", gap=0.0, penalty=None):
         scheme = str(scheme).upper()
         if scheme not in SCHEMES:
             raise ValueError(f"ExplicitContact: 'scheme' must be one of {SCHEMES}, got {scheme!r}")
@@ -383,14 +397,64 @@ class ExplicitContact:
         else:
             raise ValueError(f"ExplicitContact: 'normal' must be one of {NORMALS} or a dict "
                              f"{{body: outward normal}}, got {normal!r}")
+        if (algorithm == "penalty") != (penalty is not None):
+            raise ValueError("ExplicitContact: 'penalty' = dict(k_n=..., k_t=...) is required by, "
+                             "and only used with, algorithm='penalty'")
+        if penalty is not None:
+            if not isinstance(penalty, dict) or "k_n" not in penalty or set(penalty) - {"k_n", "k_t"}:
+                raise ValueError(f"ExplicitContact: 'penalty' must be dict(k_n=..., k_t=...) with "
+                                 f"k_t optional, got {penalty!r}")
+            kn, kt_ = penalty["k_n"], penalty.get("k_t", penalty["k_n"])
+            for name, v, lo in (("k_n", kn, 0.0), ("k_t", kt_, None)):
+                ok = isinstance(v, (int, float, np.floating)) and np.isfinite(v)
+                if not ok or (v <= lo if lo is not None else v < 0):
+                    raise ValueError(f"ExplicitContact: penalty {name} must be a finite number "
+                                     f"{'> 0' if lo is not None else '>= 0'}, got {v!r}")
+            self.k_n, self.k_t = float(kn), float(kt_)
+        self.polylines = []
+        self._penalty = None
+        self.penalty_stats = None
         self.nb = None
         self.body_contact_force = None
+
+    def add_polyline(self, body, vertices, closed=False):
+        """Boundary polyline of body `body` for algorithm="penalty": vertices (n, 2) in order;
+        closed=True joins the last to the first (made counter-clockwise); an open one must have
+        the body on its left (integrators.penalty_contact: circle, rectangle, line)."""
+        if self.algorithm != "penalty":
+            raise ValueError("ExplicitContact.add_polyline: only for algorithm='penalty'")
+        if not (isinstance(body, (int, np.integer)) and body >= 0):
+            raise ValueError(f"ExplicitContact.add_polyline: 'body' must be an integer >= 0, "
+                             f"got {body!r}")
+        self.polylines.append((int(body), check_polyline(vertices, bool(closed)), bool(closed)))
+        self._penalty = None
 
     def setup(self, sim):
         if sim.boundaries or sim.layers:
             raise NotImplementedError("ExplicitContact: Robin boundaries and particle layers "
                                       "are not supported")
+        if self.algorithm == "penalty":
+            if sim.gdim != 2:
+                raise NotImplementedError("ExplicitContact: penalty contact is 2D only")
+            if getattr(sim.grid, "axisymmetric", False):
+                raise NotImplementedError("ExplicitContact: penalty contact does not support "
+                                          "axisymmetric simulations")
         self.nb = None
+        self._penalty = None
+
+    def _penalty_state(self, sim):
+        """The PenaltyContact of the polylines, built at the first step after a change."""
+        if self._penalty is None:
+            have = {b for b, _, _ in self.polylines}
+            missing = sorted(set(range(self.nb)) - have)
+            if missing:
+                raise ValueError(f"ExplicitContact(penalty): bodies {missing} have no polyline "
+                                 f"(add_polyline)")
+            if max(have) >= self.nb:
+                raise ValueError(f"ExplicitContact(penalty): polyline of body {max(have)} but the "
+                                 f"bodies are 0..{self.nb - 1}")
+            self._penalty = PenaltyContact(self.k_n, self.k_t, self.polylines)
+        return self._penalty
 
     # ------------------------------------------------------------------ helpers
     def _bodies(self, sim):
@@ -440,7 +504,7 @@ class ExplicitContact:
         return v
 
     def _contact(self, sim, v_b, dt, fc):
-        if self.nb > 1:
+        if self.nb > 1 and self.algorithm == "multi-velocity":
             multi_velocity_contact(self._present, self._m_b, self._gm_b, self._is_rigid,
                                    self._mu, self._mode, self._n_fixed, self._has_fixed, self._xm_b,
                                    self._rm_b, self._gap, dt, v_b, fc)
@@ -480,7 +544,7 @@ class ExplicitContact:
         mv_b = np.zeros((nn, nb, d))
         gm_b = np.zeros((nn, nb, d))
         p2g_bodies(D, sim.nodes, sim.N, sim.dN, body, p.mass, p.v, m_b, mv_b, gm_b)
-        if self.gap is not None:
+        if self.gap is not None and self.algorithm == "multi-velocity":
             xm_b = np.zeros((nn, nb, d))
             rm_b = np.zeros((nn, nb))
             p2g_positions_bodies(D, sim.nodes, sim.N, body, p.mass, p.x, p.V, xm_b, rm_b)
@@ -514,14 +578,21 @@ class ExplicitContact:
         f_ext = sim.external_force(sim.t, m, active=active)
         f_b += f_ext[:, None, :] * (m_b * inv_m[:, None])[:, :, None]
         t1 = time.perf_counter()
+        if self.algorithm == "penalty":
+            pc = self._penalty_state(sim)
+            fc = pc.forces(sim, present, m_b, self._is_rigid, self._mu, dt)
+            f_b += fc
+        else:
+            fc = np.zeros((nn, nb, d))
         v1 = self._velocities(sim, mv_b + dt * f_b, inv_mb, free, sim.t + dt)
-        fc = np.zeros((nn, nb, d))
         self._contact(sim, v1, dt, fc)
         vcm0 = np.einsum("ib,ibk->ik", m_b, v0) * inv_m[:, None]
         vcm1 = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
         sim.record_work(f_ext, None, vcm0, vcm1, dt)
         t2 = time.perf_counter()
         vr = self._rigid_velocity(sim.t + dt, d) if self.rigid else np.zeros((nb, d))
+        if self.algorithm == "penalty":
+            pc.move(sim, present, m_b, v1, self._is_rigid, vr, dt)
         g2p_bodies(D, sim.nodes, sim.N, body, self._is_rigid, vr, dt, v0, v1, self.flip,
                    p.x, p.v, p.u)
         t3 = time.perf_counter()
@@ -538,8 +609,10 @@ class ExplicitContact:
         if self.scheme != "USF":
             self._stress_update(sim, body, v1, dt if self.scheme != "AVG" else 0.5 * dt)
         self.contact_force = fc
-        n_own = grid.n_owned_nodes
-        tot = fc[:n_own].sum(axis=0)
-        self.body_contact_force = sim.comm.allreduce(tot) if sim.comm.size > 1 else tot
+        if self.algorithm == "penalty":
+            self.body_contact_force, self.penalty_stats = pc.body_force, pc.stats
+        else:
+            tot = fc[:grid.n_owned_nodes].sum(axis=0)
+            self.body_contact_force = sim.comm.allreduce(tot) if sim.comm.size > 1 else tot
         vcm = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
         sim.nodal = dict(mass=m, velocity=vcm, active=active, body_mass=m_b, body_velocity=v1)

@@ -1,0 +1,394 @@
+"""Penalty node-to-segment contact between bodies (seed 004 §2.6.4-2.6.8, eqs 2.40-2.53), the
+`algorithm="penalty"` of fm.ExplicitContact (2D).
+
+Polylines. Each body has one or more boundary polylines (`ExplicitContact.add_polyline`;
+`circle`, `rectangle` and `line` below build common ones). Orientation: the body lies on the
+LEFT of each segment x1 -> x2 (closed polylines are made counter-clockwise automatically), so
+with e_t = (x2 - x1)/|x2 - x1| the outward unit normal is e_n = (e_t,y, -e_t,x). The vertices
+move with their body's grid velocity like particles, x_v += dt v_v, with
+    v_v = sum_i N_i(x_v) m_i^b v_i^b / W_v,   W_v = sum_i N_i(x_v) m_i^b
+(standard shape functions weighted by the body's nodal mass, over the nodes where the body is
+present; a rigid body's vertices move with its prescribed velocity). A vertex with W_v = 0
+(no mass of its body around it, or outside the mesh) stays where it is and takes no part.
+
+Detection (seed 004 §2.6.7, in three steps): (1) only vertices whose cell has a node where two
+or more bodies are present are slaves; (2) a bucket search (bins of size h + l_max/2) gives
+the segments of the other bodies within reach; (3) the slave s and segment (x1, x2) form a
+pair when
+    xi  = (x_s - x1) . e_t / l in [0, 1]     (eq 2.43),
+    g_n = (x_s - x1) . e_n < 0               (eq 2.42, 2.51: gap g_n < 0 is penetration),
+for the segment of least |g_n| among those with |g_n| <= h (deeper penetrations are not
+searched) that face the slave, e_n . n_s < -1/2 (n_s the slave's mean outward normal; this
+removes the ambiguity at the master's corners, where a side face can be nearer than the
+face that was penetrated). Every body's vertices are slaves against every other body's
+segments (two-pass, each pass with weight w = 1/2, so no master/slave choice is needed).
+
+Forces (eqs 2.45-2.48 with the g_n/l terms of C_n, C_t dropped: penetrations are small).
+With l_s the slave's tributary length (half its two segments) and k_n, k_t in force per unit
+length per unit penetration or slip (Pa/m per unit thickness):
+    normal:      f_n = w k_n (-g_n) l_s >= 0                     (compressive),
+    tangential:  f_t* = f_t^old - w k_t l_s dg_t,  dg_t = (du_s - (1 - xi) du_1 - xi du_2) . e_t
+                 (the elastic slip spring: du the vertices' displacements over the last step),
+    Coulomb cap: |f_t| <= mu f_n:  f_t = f_t* if |f_t*| <= mu f_n (stick), else
+                 mu f_n sign(f_t*) (slip); f_t is stored per slave vertex (0 out of contact),
+    F_s = f_n e_n + f_t e_t on the slave, -(1 - xi) F_s and -xi F_s on the segment's ends,
+so the forces on the bodies are equal and opposite (momentum is conserved exactly). Each
+vertex force goes to its body's nodes (eq 2.52) with the weights N_i m_i^b / W_v (they sum
+to one; mass weighting gives every node the same acceleration, so nodes with little mass at
+the body's edge do not blow up) as external nodal force, F^cont of eq 2.53.
+
+MPI. The polylines are replicated on every rank (O(surface) memory and work per rank). Each
+vertex is owned by one rank (the highest rank that has it in an owned cell); the owner
+interpolates W_v and v_v and evaluates the pairs of its slave vertices; allreduces sum W_v,
+the vertex forces and the vertex displacements, and each rank maps the forces of its own
+vertices, so nothing is counted twice (grid.accumulate then sums the nodal forces).
+
+Stability. The springs of the vertices along a cell edge give a surface node k ~ k_n h
+against a (reduced) surface mass m ~ rho h^2 / 4 per unit thickness, so
+    dt <= 2 sqrt(m / k) = sqrt(rho_min h / k_n);
+k_n = (K + 4G/3)/h of the stiffer body makes this the elastic wave limit h / c_p. A step
+above it is warned about (RuntimeWarning).
+
+Not yet: 3D (surfaces), axisymmetric grids, and the polyline state (positions, tangential
+forces) is not written to checkpoints."""
+import math
+import warnings
+
+import numpy as np
+from numba import njit
+
+from ..kernels import shape as ks
+
+__all__ = ["circle", "rectangle", "line", "PenaltyContact"]
+
+
+# ---------------------------------------------------------------------------- polylines
+def circle(centre, radius, n):
+    """n vertices on a circle, counter-clockwise (a closed polyline of a disc)."""
+    if not (isinstance(n, (int, np.integer)) and n >= 3 and radius > 0):
+        raise ValueError(f"circle: need n >= 3 and radius > 0, got n={n!r}, radius={radius!r}")
+    a = 2.0 * np.pi * np.arange(n) / n
+    return np.asarray(centre, dtype=np.float64) + radius * np.column_stack([np.cos(a), np.sin(a)])
+
+
+def line(a, b, n):
+    """n + 1 equally spaced vertices from a to b (an open polyline; the body lies on the left
+    of a -> b)."""
+    if not (isinstance(n, (int, np.integer)) and n >= 1):
+        raise ValueError(f"line: 'n' must be an integer >= 1, got {n!r}")
+    s = np.linspace(0.0, 1.0, n + 1)[:, None]
+    return (1.0 - s) * np.asarray(a, dtype=np.float64) + s * np.asarray(b, dtype=np.float64)
+
+
+def rectangle(lo, hi, spacing):
+    """The boundary of the box [lo, hi], counter-clockwise, vertices about `spacing` apart
+    (a closed polyline)."""
+    lo, hi = np.asarray(lo, dtype=np.float64), np.asarray(hi, dtype=np.float64)
+    if not (np.all(hi > lo) and spacing > 0):
+        raise ValueError(f"rectangle: need hi > lo and spacing > 0, got {lo}, {hi}, {spacing!r}")
+    nx, ny = (max(1, int(math.ceil(v / spacing))) for v in hi - lo)
+    c = [lo, (hi[0], lo[1]), hi, (lo[0], hi[1]), lo]
+    n = [nx, ny, nx, ny]
+    return np.concatenate([line(c[k], c[k + 1], n[k])[:-1] for k in range(4)])
+
+
+def check_polyline(vertices, closed):
+    """Validated float64 (n, 2) vertices (closed ones counter-clockwise)."""
+    x = np.array(vertices, dtype=np.float64)
+    if x.ndim != 2 or x.shape[1] != 2:
+        raise ValueError(f"add_polyline: vertices must be an (n, 2) array (2D meshes), got shape "
+                         f"{x.shape}")
+    if len(x) < (3 if closed else 2) or not np.all(np.isfinite(x)):
+        raise ValueError(f"add_polyline: need {3 if closed else 2} or more finite vertices")
+    seg = np.diff(np.vstack([x, x[:1]]) if closed else x, axis=0)
+    if np.any(np.linalg.norm(seg, axis=1) == 0):
+        raise ValueError("add_polyline: repeated vertices (zero-length segment)")
+    if closed:
+        area = 0.5 * np.sum(x[:, 0] * np.roll(x[:, 1], -1) - np.roll(x[:, 0], -1) * x[:, 1])
+        if area == 0:
+            raise ValueError("add_polyline: a closed polyline must enclose an area")
+        if area < 0:
+            x = x[::-1].copy()
+    return x
+
+
+# ---------------------------------------------------------------------------- kernels
+@njit(cache=True)
+def tributary(x, seg, out, nrm):
+    """out[v] = half the length of the segments at v, nrm[v] = the unit mean outward normal
+    of those segments; returns the largest segment length."""
+    lmax = 0.0
+    for s in range(seg.shape[0]):
+        i, j = seg[s, 0], seg[s, 1]
+        tx, ty = x[j, 0] - x[i, 0], x[j, 1] - x[i, 1]
+        L = np.sqrt(tx * tx + ty * ty)
+        for v in (i, j):
+            out[v] += 0.5 * L
+            nrm[v, 0] += ty / L
+            nrm[v, 1] -= tx / L
+        lmax = max(lmax, L)
+    for v in range(x.shape[0]):
+        n = np.sqrt(nrm[v, 0] ** 2 + nrm[v, 1] ** 2)
+        if n > 0.0:
+            nrm[v, 0] /= n
+            nrm[v, 1] /= n
+    return lmax
+
+
+@njit(cache=True)
+def bin_segments(x, seg, lo, w, nbx, nby):
+    """Segments sorted into bins of size w by their midpoints (CSR: start, items)."""
+    ns = seg.shape[0]
+    key = np.empty(ns, dtype=np.int64)
+    start = np.zeros(nbx * nby + 1, dtype=np.int64)
+    for s in range(ns):
+        i, j = seg[s, 0], seg[s, 1]
+        bx = int((0.5 * (x[i, 0] + x[j, 0]) - lo[0]) / w)
+        by = int((0.5 * (x[i, 1] + x[j, 1]) - lo[1]) / w)
+        key[s] = bx * nby + by
+        start[key[s] + 1] += 1
+    for k in range(nbx * nby):
+        start[k + 1] += start[k]
+    fill = start[:-1].copy()
+    items = np.empty(ns, dtype=np.int64)
+    for s in range(ns):
+        items[fill[key[s]]] = s
+        fill[key[s]] += 1
+    return start, items
+
+
+@njit(cache=True)
+def vertex_weights(own, nodes, N, vbody, present, m_b, W):
+    """W[v] = sum_i N_i(x_v) m_i^b over the nodes where body b = vbody[v] is present."""
+    for r in range(own.shape[0]):
+        v = own[r]
+        b = vbody[v]
+        w = 0.0
+        for a in range(nodes.shape[1]):
+            i = nodes[r, a]
+            if present[i, b]:
+                w += N[r, a] * m_b[i, b]
+        W[v] = w
+
+
+@njit(cache=True)
+def vertex_velocity(own, nodes, N, vbody, present, m_b, W, v_b, out):
+    """out[v] = sum_i N_i m_i^b v_i^b / W_v (module docstring)."""
+    d = out.shape[1]
+    for r in range(own.shape[0]):
+        v = own[r]
+        b = vbody[v]
+        if W[v] <= 0.0:
+            continue
+        for a in range(nodes.shape[1]):
+            i = nodes[r, a]
+            if present[i, b]:
+                c = N[r, a] * m_b[i, b] / W[v]
+                for k in range(d):
+                    out[v, k] += c * v_b[i, b, k]
+
+
+@njit(cache=True)
+def map_vertex_forces(own, nodes, N, vbody, present, m_b, W, rigid, F, out):
+    """out[i, b] += N_i m_i^b F_v / W_v for the owned vertices v of deformable bodies (eq 2.52)."""
+    d = F.shape[1]
+    for r in range(own.shape[0]):
+        v = own[r]
+        b = vbody[v]
+        if rigid[b] or W[v] <= 0.0:
+            continue
+        for a in range(nodes.shape[1]):
+            i = nodes[r, a]
+            if present[i, b]:
+                c = N[r, a] * m_b[i, b] / W[v]
+                for k in range(d):
+                    out[i, b, k] += c * F[v, k]
+
+
+@njit(cache=True)
+def penalty_pairs(own, nodes, present, x, du, vbody, seg, sbody, ltrib, vn, W, rigid, lo, w, nbx,
+                  nby, start, items, k_n, k_t, mu, depth, ft_old, F, ft_new, stats):
+    """Detection and forces of the module docstring for the owned slave vertices `own`
+    (nodes: their cells' nodes): F (vertex forces, slave and segment ends) and ft_new (the
+    slaves' tangential force) are added to; stats[0] += pairs, stats[1] = max penetration,
+    stats[2] += slipping pairs."""
+    nb = present.shape[1]
+    wt = 0.5                                          # two-pass weight
+    for r in range(own.shape[0]):
+        s = own[r]
+        a = vbody[s]
+        if W[s] <= 0.0 and not rigid[a]:
+            continue
+        shared = False                                # step 1: a node with >= 2 bodies
+        for q in range(nodes.shape[1]):
+            cnt = 0
+            for b in range(nb):
+                if present[nodes[r, q], b]:
+                    cnt += 1
+            if cnt >= 2:
+                shared = True
+                break
+        if not shared:
+            continue
+        bx = int((x[s, 0] - lo[0]) / w)
+        by = int((x[s, 1] - lo[1]) / w)
+        best, gbest, xbest = -1, 0.0, 0.0
+        for ix in range(max(bx - 1, 0), min(bx + 2, nbx)):      # step 2: nearby segments
+            for iy in range(max(by - 1, 0), min(by + 2, nby)):
+                key = ix * nby + iy
+                for e in range(start[key], start[key + 1]):
+                    sg = items[e]
+                    b = sbody[sg]
+                    if b == a:
+                        continue
+                    i1, i2 = seg[sg, 0], seg[sg, 1]
+                    if not rigid[b] and (W[i1] <= 0.0 or W[i2] <= 0.0):
+                        continue
+                    tx, ty = x[i2, 0] - x[i1, 0], x[i2, 1] - x[i1, 1]
+                    L = np.sqrt(tx * tx + ty * ty)
+                    tx /= L
+                    ty /= L
+                    rx, ry = x[s, 0] - x[i1, 0], x[s, 1] - x[i1, 1]
+                    xi = (rx * tx + ry * ty) / L          # eq 2.43
+                    g = rx * ty - ry * tx                 # eq 2.42, e_n = (t_y, -t_x)
+                    if (xi < 0.0 or xi > 1.0 or abs(g) > depth
+                            or ty * vn[s, 0] - tx * vn[s, 1] > -0.5):  # not facing the slave
+                        continue
+                    if best < 0 or abs(g) < abs(gbest):
+                        best, gbest, xbest = sg, g, xi
+        if best < 0 or gbest >= 0.0:                  # step 3: eq 2.51
+            continue
+        b = sbody[best]
+        i1, i2 = seg[best, 0], seg[best, 1]
+        tx, ty = x[i2, 0] - x[i1, 0], x[i2, 1] - x[i1, 1]
+        L = np.sqrt(tx * tx + ty * ty)
+        tx /= L
+        ty /= L
+        nx, ny = ty, -tx
+        xi = xbest
+        fn = wt * k_n * (-gbest) * ltrib[s]
+        dgt = ((du[s, 0] - (1.0 - xi) * du[i1, 0] - xi * du[i2, 0]) * tx
+               + (du[s, 1] - (1.0 - xi) * du[i1, 1] - xi * du[i2, 1]) * ty)
+        ft = ft_old[s] - wt * k_t * ltrib[s] * dgt
+        cap = mu[a, b] * fn
+        if abs(ft) > cap:
+            ft = cap if ft > 0.0 else -cap
+            stats[2] += 1.0
+        ft_new[s] = ft
+        fx, fy = fn * nx + ft * tx, fn * ny + ft * ty
+        F[s, 0] += fx
+        F[s, 1] += fy
+        F[i1, 0] -= (1.0 - xi) * fx
+        F[i1, 1] -= (1.0 - xi) * fy
+        F[i2, 0] -= xi * fx
+        F[i2, 1] -= xi * fy
+        stats[0] += 1.0
+        stats[1] = max(stats[1], -gbest)
+
+
+# ---------------------------------------------------------------------------- driver
+class PenaltyContact:
+    """State and per-step work of penalty contact for fm.ExplicitContact: the replicated
+    polylines (vertices x, bodies, segments), the vertices' last displacement du and the
+    slaves' tangential force ft (module docstring)."""
+
+    def __init__(self, k_n, k_t, polylines):
+        self.k_n, self.k_t = k_n, k_t
+        xs, vb, segs, off = [], [], [], 0
+        for body, x, closed in polylines:
+            n = len(x)
+            i = np.arange(off, off + n)
+            segs.append(np.column_stack([i, np.roll(i, -1)]) if closed else
+                        np.column_stack([i[:-1], i[1:]]))
+            xs.append(x)
+            vb.append(np.full(n, body, dtype=np.int32))
+            off += n
+        self.x = np.ascontiguousarray(np.concatenate(xs))
+        self.vbody = np.concatenate(vb)
+        self.seg = np.ascontiguousarray(np.concatenate(segs).astype(np.int64))
+        self.sbody = np.ascontiguousarray(self.vbody[self.seg[:, 0]])
+        self.du = np.zeros_like(self.x)
+        self.ft = np.zeros(len(self.x))
+        self.stats = dict(pairs=0, max_penetration=0.0, slipping=0)
+        self._warned_dt = False
+
+    def _allreduce(self, comm, a, op=None):
+        if comm.size == 1:
+            return a
+        from mpi4py import MPI
+        out = np.empty_like(a)
+        comm.Allreduce(a, out, op=op or MPI.SUM)
+        return out
+
+    def check_dt(self, sim):
+        """Warn once when dt exceeds sqrt(rho_min h / k_n) (module docstring)."""
+        rho = min(m.density for m in sim.particles.materials)
+        self.dt_penalty = math.sqrt(rho * sim.grid.h / self.k_n)
+        if sim.dt > self.dt_penalty and not self._warned_dt:
+            self._warned_dt = True
+            if sim.comm.rank == 0:
+                warnings.warn(f"ExplicitContact(penalty): dt = {sim.dt:.4g} s exceeds the penalty "
+                              f"spring's stable step sqrt(rho h / k_n) = {self.dt_penalty:.4g} s; "
+                              f"lower k_n (about (K + 4G/3)/h) or dt", RuntimeWarning, stacklevel=3)
+
+    def forces(self, sim, present, m_b, rigid, mu, dt):
+        """Locate the vertices, find the pairs and return the nodal contact forces
+        (n_nodes, nb, 2), summed over ranks; sets self.body_force (nb, 2)."""
+        grid, comm = sim.grid, sim.comm
+        self.check_dt(sim)
+        cells, xi = grid.locate(self.x)
+        mine = (cells >= 0) & (cells < grid.n_owned_cells)
+        if comm.size > 1:
+            from mpi4py import MPI
+            claim = self._allreduce(comm, np.where(mine, comm.rank, -1).astype(np.int32), MPI.MAX)
+            mine = claim == comm.rank
+        own = np.flatnonzero(mine)
+        nv = grid.cell_nodes.shape[1]
+        self._own = own
+        self._nodes = np.empty((len(own), nv), dtype=np.int32)
+        self._N = np.empty((len(own), nv))
+        ks.mpm_shape(grid.D, grid.kind, cells[own], np.ascontiguousarray(xi[own]), grid.cell_nodes,
+                     grid.node_x, grid.simplex_grad, grid.affine_Jinv, self._nodes, self._N,
+                     np.empty((len(own), nv, grid.gdim)))
+        W = np.zeros(len(self.x))
+        vertex_weights(own, self._nodes, self._N, self.vbody, present, m_b, W)
+        self.W = W = self._allreduce(comm, W)
+        ltrib = np.zeros(len(self.x))
+        vn = np.zeros_like(self.x)
+        lmax = tributary(self.x, self.seg, ltrib, vn)
+        depth = grid.h
+        w = depth + 0.5 * lmax
+        lo = self.x.min(axis=0) - w
+        nbx, nby = (int(v) for v in (self.x.max(axis=0) - lo) // w + 2)
+        start, items = bin_segments(self.x, self.seg, lo, w, nbx, nby)
+        nvx = len(self.x)
+        buf = np.zeros(3 * nvx + 3)                   # F (nv, 2), ft, stats
+        F, ft, stats = buf[: 2 * nvx].reshape(nvx, 2), buf[2 * nvx: 3 * nvx], buf[3 * nvx:]
+        penalty_pairs(own, self._nodes, present, self.x, self.du, self.vbody, self.seg, self.sbody,
+                      ltrib, vn, W, rigid, lo, w, nbx, nby, start, items, self.k_n, self.k_t, mu,
+                      depth, self.ft, F, ft, stats)
+        pen = stats[1]
+        buf = self._allreduce(comm, buf)
+        F, self.ft = buf[: 2 * nvx].reshape(nvx, 2), buf[2 * nvx: 3 * nvx].copy()
+        if comm.size > 1:
+            from mpi4py import MPI
+            pen = comm.allreduce(pen, op=MPI.MAX)
+        self.stats = dict(pairs=int(buf[-3]), max_penetration=pen, slipping=int(buf[-1]))
+        nb = m_b.shape[1]
+        self.body_force = np.stack([np.bincount(self.vbody, F[:, k], minlength=nb)
+                                    for k in range(2)], axis=1)
+        out = np.zeros((grid.n_nodes, nb, 2))
+        map_vertex_forces(own, self._nodes, self._N, self.vbody, present, m_b, W, rigid,
+                          np.ascontiguousarray(F), out)
+        grid.accumulate(out.reshape(grid.n_nodes, -1))
+        return out
+
+    def move(self, sim, present, m_b, v_b, rigid, v_rigid, dt):
+        """x_v += dt v_v with the end-of-step nodal velocities v_b (rigid bodies: v_rigid)."""
+        v = np.zeros_like(self.x)
+        vertex_velocity(self._own, self._nodes, self._N, self.vbody, present, m_b, self.W, v_b, v)
+        v = self._allreduce(sim.comm, v)
+        r = rigid[self.vbody]
+        v[r] = v_rigid[self.vbody[r]]
+        self.du = dt * v
+        self.x += self.du
