@@ -11,7 +11,8 @@ from .particles import Particles
 from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
-from .integrators import ExplicitContact, set_body
+from .integrators import ExplicitContact, RigidLoad, set_body
+from .integrators import DoubleMappingNewmark, DoubleMappingQuasiStatic
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .boundaries import CompliantBase, InputMotion, compliant_base, rigid_base
 from .simulation import Simulation, Probe, Output
@@ -42,4 +43,4 @@ __all__ = ["Grid", "Particles", "Hencky", "LinearElastic", "NeoHookean", "MohrCo
            "QuasiStatic", "Simulation", "Probe", "Output", "Robin", "Viscous", "Viscoelastic", "ParticleLayer"]
 __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
 __all__ += ["CompliantBase", "InputMotion", "compliant_base", "rigid_base"]
-__all__ += ["ExplicitContact", "set_body"]
+__all__ += ["ExplicitContact", "RigidLoad", "set_body"]
