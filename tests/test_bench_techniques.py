@@ -3,7 +3,8 @@
 Serial only: the case is run once per module at --quick size (under an MPI size > 1 the
 module is skipped, like the other bench tests that run a whole case). Checks the JSON
 schema, the PNG, that the half-step AVG order's end-of-run energy error on the colliding
-discs is below USL's, and the README block rewrite on a temporary copy of README.md."""
+discs is below USL's, that the mixed integration ran everywhere and beats the baseline's
+stress error on L1, and the README block rewrite on a temporary copy of README.md."""
 import json
 import os
 import shutil
@@ -97,6 +98,18 @@ def test_avg_energy_below_usl_on_discs(quick):
     by = {r["technique"]: r["metrics"] for r in doc["runs"] if r["problem"] == "discs"}
     avg, usl = by["AVG"]["error"], by["USL"]["error"]
     assert avg < usl, f"AVG energy error {avg:.3e} is not below USL's {usl:.3e}"
+
+
+def test_mixed_integration_rows(quick):
+    """The mixed MPM-Gauss-point integration runs on every problem (shape "mpm") and, on the
+    soft column L1, has a smaller stress error than the baseline (less cell-crossing noise)."""
+    _, doc = quick
+    by = {(r["problem"], r["technique"]): r for r in doc["runs"]}
+    for prob in doc["problems"]:
+        r = by[(prob, "MUSL mpm + mixed")]
+        assert r["config"]["force_integration"] == "mixed" and not r["metrics"].get("failed")
+    assert (by[("L1", "MUSL mpm + mixed")]["metrics"]["error"]
+            < by[("L1", techniques.BASELINE)]["metrics"]["error"])
 
 
 def test_readme_rewrite(quick, tmp_path):

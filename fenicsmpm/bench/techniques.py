@@ -14,6 +14,8 @@ brackets):
   MUSL cpgimp, MUSL cpdi2 (baselines GIMP and CPDI; full: also ugimp, cpdi1, gauss) [shape]
   MUSL mpm + split (sim.enable_splitting(2, 0.5, 1), seed 002 §3.4)        [splitting]
   MUSL mpm + smoothed (stress_feedback="smoothed", seed 002 eqs 4.18-4.19)   [stress feedback]
+  MUSL mpm + mixed (force_integration="mixed": Gauss points in full cells, particles at
+                    the material boundary; seed 003 after Jassim 2013)     [force integration]
 
 Problems and error measures (the `error` metric of each run):
   V2      the AMPLE large-deformation Hencky column (fenicsmpm.verification_column) relaxed
@@ -40,9 +42,10 @@ Problems and error measures (the `error` metric of each run):
           n = 20 cells (quick 5).
 Not applicable (recorded in "not_applicable", no number invented): wide shapes on W1 (the
 W1 builder absorbing_column takes no shape argument).
-On V2 and W1 the smoothed feedback is switched on by setting sim.stress_feedback after the
-builder made the Simulation (the attribute the constructor argument sets); on the discs the
-Simulation is rebuilt on the builder's grid and particles with shape / stress_feedback.
+On V2, W1 and L1 the smoothed feedback and the mixed integration are switched on by setting
+sim.stress_feedback / sim.force_integration after the builder made the Simulation (the
+attributes the constructor arguments set); on the discs the Simulation is rebuilt on the
+builder's grid and particles with shape / stress_feedback / force_integration.
 
 wall_s: the time inside sim.step over the whole run (full size: the fastest of 2 repeats,
 metric wall_s_repeats), JIT compilation and cache loading excluded: every configuration first runs a few steps of a tiny copy of its problem, whose
@@ -87,16 +90,18 @@ W1_T = 1.4
 L1 = dict(height=10.0, E=5e6, nu=0.0, density=6000.0, g=10.0)
 L1_RAMP = 20.0
 BASELINE = "MUSL mpm"
-FAMILIES = ("update order", "shape", "splitting", "stress feedback")
+FAMILIES = ("update order", "shape", "splitting", "stress feedback", "force integration")
 
 
-def _cfg(name, family, scheme="MUSL", rho_b=None, shape="mpm", split=False, smoothed=False):
+def _cfg(name, family, scheme="MUSL", rho_b=None, shape="mpm", split=False, smoothed=False,
+         mixed=False):
     return dict(name=name, family=family, scheme=scheme, rho_b=rho_b, shape=shape, split=split,
-                smoothed=smoothed)
+                smoothed=smoothed, mixed=mixed)
 
 
 def configurations(quick=False):
-    """The configuration list (dicts: name, family, scheme, rho_b, shape, split, smoothed)."""
+    """The configuration list (dicts: name, family, scheme, rho_b, shape, split, smoothed,
+    mixed)."""
     c = [_cfg(BASELINE, "baseline")]
     c += [_cfg(s, "update order", scheme=s) for s in ("USF", "USL", "AVG")]
     c += [_cfg(f"GA rho_b={r:g}", "update order", scheme="GA", rho_b=r)
@@ -105,6 +110,7 @@ def configurations(quick=False):
           for s in (("cpgimp", "cpdi2") if quick else ("ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss"))]
     c += [_cfg("MUSL mpm + split", "splitting", split=True)]
     c += [_cfg("MUSL mpm + smoothed", "stress feedback", smoothed=True)]
+    c += [_cfg("MUSL mpm + mixed", "force integration", mixed=True)]
     return c
 
 
@@ -178,7 +184,8 @@ def build(problem, cfg, size, comm):
         sim0, ex = colliding_discs(integ, n_cells=int(size), cfl=DISCS_CFL, comm=comm,
                                    partitioner=part)
         sim = fm.Simulation(sim0.grid, sim0.particles, integ, dt=sim0.dt, shape=cfg["shape"],
-                            stress_feedback="smoothed" if cfg["smoothed"] else None)
+                            stress_feedback="smoothed" if cfg["smoothed"] else None,
+                            force_integration="mixed" if cfg["mixed"] else "particles")
         ex["h"] = sim.grid.h
         steps = int(math.ceil(DISCS_T / sim.dt - 1e-9))
     elif problem == "W1":
@@ -191,6 +198,8 @@ def build(problem, cfg, size, comm):
         raise ValueError(f"{CASE}: unknown problem {problem!r}")
     if cfg["smoothed"] and problem != "discs":
         sim.stress_feedback = "smoothed"
+    if cfg["mixed"] and problem != "discs":
+        sim.force_integration = "mixed"
     if cfg["split"]:
         sim.enable_splitting(alpha=2.0, beta=0.5, gamma=1.0)
     return sim, ex, steps
@@ -265,6 +274,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
                   integrator="ExplicitGeneralizedAlpha" if cfg["scheme"] == "GA" else "Explicit",
                   scheme=cfg["scheme"], rho_b=cfg["rho_b"], shape=cfg["shape"],
                   splitting=cfg["split"], stress_feedback="smoothed" if cfg["smoothed"] else None,
+                  force_integration="mixed" if cfg["mixed"] else "particles",
                   h=float(ex["h"] if isinstance(ex, dict) else ex.h), dt=float(sim.dt), ppc=4,
                   cell_type="quadrilateral", size=size, error_measure=ERROR_NAMES[problem])
     if failure is not None:
@@ -433,7 +443,8 @@ def update_readme(doc, path):
 
 # ---------------------------------------------------------------------------- output
 COLORS = {"baseline": "k", "update order": "tab:blue", "shape": "tab:green",
-          "splitting": "tab:red", "stress feedback": "tab:purple"}
+          "splitting": "tab:red", "stress feedback": "tab:purple",
+          "force integration": "tab:orange"}
 
 
 def plot(doc, path, comm):
