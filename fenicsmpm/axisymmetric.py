@@ -89,3 +89,27 @@ def hoop_stiffness(nodes, N, dN, V, A, r, plan, nodeptr, constrained, data):
                     for c in range(2):
                         block[k, c] *= V[p]
                 add_block(data, plan[p, a, b], deg, i, nodes[p, b], 2, constrained, block)
+
+
+@njit(cache=True)
+def hoop_strain_bodies(nodes, N, body, rigid, w, scale, r, dF):
+    """hoop_strain with one nodal field per body (w: (n_nodes, n_bodies, 2)); rigid bodies keep
+    dF_tt = 1 (multi-velocity contact, integrators.contact)."""
+    for p in range(nodes.shape[0]):
+        b = body[p]
+        if rigid[b]:
+            continue
+        s = 0.0
+        for a in range(nodes.shape[1]):
+            s += N[p, a] * w[nodes[p, a], b, 0]
+        dF[p, 2, 2] = 1.0 + scale * s / r[p]
+
+
+@njit(cache=True)
+def hoop_force_bodies(nodes, N, body, V, stress, r, out):
+    """hoop_force into each body's field: out[i, body_p, r] -= V_p stress_p,tt N_ip / r_p."""
+    for p in range(nodes.shape[0]):
+        c = V[p] * stress[p, 2, 2] / r[p]
+        b = body[p]
+        for a in range(nodes.shape[1]):
+            out[nodes[p, a], b, 0] -= c * N[p, a]

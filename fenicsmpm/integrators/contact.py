@@ -54,7 +54,10 @@ re-mapped velocities of MUSL/AVG. The contact force on each body is kept per nod
 Rigid bodies: `rigid={body_id: velocity}` with velocity a vector or a function t -> vector.
 Their particles move with that velocity (no stress update), their nodal velocity is the
 prescribed one, and at a node they share with deformable bodies v^cm is the rigid
-velocity (the rigid body has infinite inertia).
+velocity (the rigid body has infinite inertia). A rigid body may instead be driven by a
+force, rigid={b: fm.RigidLoad(force, gravity)} (integrators.rigid: its velocity follows the
+applied force, its weight and the contact reaction of the step). `body_contact_force[b]` of a
+rigid body is that reaction: minus the contact forces on the other bodies at its nodes.
 
 Penalty contact (algorithm="penalty", 2D; seed 004 eqs 2.40-2.53; integrators.penalty_contact
 has the equations, the sign convention g_n < 0 = penetration, the Coulomb cap |f_t| <= mu f_n
@@ -67,8 +70,11 @@ Rigid bodies' polylines move with their prescribed velocity. The per-body contac
 again `body_contact_force`, and `penalty_stats` holds the step's number of pairs, slipping
 pairs and largest penetration.
 
-Frictional rigid boundaries of the simulation (add_friction) act on every body's field;
-Robin boundaries and particle layers are not supported by this integrator."""
+Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
+boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
+and their force is shared among the bodies at a node by mass, like the external force.
+Axisymmetric grids get the hoop terms of fenicsmpm.axisymmetric per body (multi-velocity
+only). Particle-layer boundaries are not supported by this integrator."""
 import time
 
 import numpy as np
@@ -76,7 +82,9 @@ from numba import njit
 
 from ..kernels import transfer as kt
 from .explicit import SCHEMES
+from .. import axisymmetric as axi
 from .penalty_contact import PenaltyContact, check_polyline
+from .rigid import RigidLoad
 
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
 
@@ -350,7 +358,8 @@ class ExplicitContact:
     mu: Coulomb coefficient between every pair of bodies (>= 0; 0 is frictionless, a large
     value sticks without gluing: separation is still allowed), or a dict {(a, b): mu_ab}
     over body pairs with the default `mu_default` for the others.
-    rigid: {body_id: velocity vector or t -> vector} for rigid bodies with prescribed motion.
+    rigid: {body_id: velocity vector or t -> vector} for rigid bodies with prescribed motion,
+    or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
     algorithm="penalty": penalty=dict(k_n=..., k_t=...) (> 0 and >= 0, force per unit length
@@ -430,9 +439,8 @@ class ExplicitContact:
         self._penalty = None
 
     def setup(self, sim):
-        if sim.boundaries or sim.layers:
-            raise NotImplementedError("ExplicitContact: Robin boundaries and particle layers "
-                                      "are not supported")
+        if sim.layers:
+            raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
         if self.algorithm == "penalty":
             if sim.gdim != 2:
                 raise NotImplementedError("ExplicitContact: penalty contact is 2D only")
@@ -475,6 +483,13 @@ class ExplicitContact:
             self._is_rigid = np.zeros(nb, dtype=np.bool_)
             for b in self.rigid:
                 self._is_rigid[b] = True
+            loads = [b for b, law in self.rigid.items() if isinstance(law, RigidLoad) and law.mass is None]
+            if loads:                            # force-driven rigid bodies: their masses
+                mass_b = np.bincount(body, p.mass, minlength=nb)
+                if sim.comm.size > 1:
+                    mass_b = sim.comm.allreduce(mass_b)
+                for b in loads:
+                    self.rigid[b].start(mass_b[b], sim.gdim)
             self._mode = self.normal_mode
             self._n_fixed = np.zeros((nb, sim.gdim))
             self._has_fixed = np.zeros(nb, dtype=np.bool_)
@@ -520,6 +535,8 @@ class ExplicitContact:
         dF = sim._dF
         t0 = time.perf_counter()
         incremental_F_bodies(sim.grid.D, sim.nodes, sim.dN, body, self._is_rigid, v_b, dt, dF)
+        if sim.axisymmetric:
+            axi.hoop_strain_bodies(sim.nodes, sim.N, body, self._is_rigid, v_b, dt, sim._r, dF)
         sim.timers["constitutive"] += time.perf_counter() - t0
         sim.trial_stress(dF)
         sim.commit(dF)
@@ -531,9 +548,8 @@ class ExplicitContact:
 
     # ------------------------------------------------------------------ step
     def step(self, sim, dt):
-        if sim.robin is not None or sim.layers:
-            raise NotImplementedError("ExplicitContact: Robin boundaries and particle layers "
-                                      "are not supported")
+        if sim.layers:
+            raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
         p, grid, T = sim.particles, sim.grid, sim.timers
         D, d = grid.D, sim.gdim
         sim.locate_and_shape()
@@ -573,10 +589,18 @@ class ExplicitContact:
             self._stress_update(sim, body, v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f_b = np.zeros((nn, nb, d))
-        internal_force_bodies(D, sim.nodes, sim.dN, body, p.V, sim.dynamic_stress(p.stress), f_b)
+        stress = sim.dynamic_stress(p.stress)
+        internal_force_bodies(D, sim.nodes, sim.dN, body, p.V, stress, f_b)
+        if sim.axisymmetric:
+            axi.hoop_force_bodies(sim.nodes, sim.N, body, p.V, stress, sim._r, f_b)
         self._acc(grid, f_b)
         f_ext = sim.external_force(sim.t, m, active=active)
-        f_b += f_ext[:, None, :] * (m_b * inv_m[:, None])[:, :, None]
+        share = (m_b * inv_m[:, None])[:, :, None]        # each body's share of a nodal force
+        f_b += f_ext[:, None, :] * share
+        vcm0 = np.einsum("ib,ibk->ik", m_b, v0) * inv_m[:, None]
+        f_robin = sim.boundary_force(vcm0)            # Robin boundaries (summed over ranks)
+        if f_robin is not None:
+            f_b += f_robin[:, None, :] * share
         t1 = time.perf_counter()
         if self.algorithm == "penalty":
             pc = self._penalty_state(sim)
@@ -586,9 +610,8 @@ class ExplicitContact:
             fc = np.zeros((nn, nb, d))
         v1 = self._velocities(sim, mv_b + dt * f_b, inv_mb, free, sim.t + dt)
         self._contact(sim, v1, dt, fc)
-        vcm0 = np.einsum("ib,ibk->ik", m_b, v0) * inv_m[:, None]
         vcm1 = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
-        sim.record_work(f_ext, None, vcm0, vcm1, dt)
+        sim.record_work(f_ext, f_robin, vcm0, vcm1, dt)
         t2 = time.perf_counter()
         vr = self._rigid_velocity(sim.t + dt, d) if self.rigid else np.zeros((nb, d))
         if self.algorithm == "penalty":
@@ -612,7 +635,15 @@ class ExplicitContact:
         if self.algorithm == "penalty":
             self.body_contact_force, self.penalty_stats = pc.body_force, pc.stats
         else:
-            tot = fc[:grid.n_owned_nodes].sum(axis=0)
+            own = slice(0, grid.n_owned_nodes)
+            tot = fc[own].sum(axis=0)
+            for b in self.rigid:       # reaction of the bodies it pushes at its nodes
+                tot[b] = -fc[own][present[own, b]].sum(axis=(0, 1))
             self.body_contact_force = sim.comm.allreduce(tot) if sim.comm.size > 1 else tot
+        for b, law in self.rigid.items():
+            if isinstance(law, RigidLoad):
+                law.advance(sim.t, dt, self.body_contact_force[b])
         vcm = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
+        if sim.robin is not None:
+            sim.robin_u += dt * vcm
         sim.nodal = dict(mass=m, velocity=vcm, active=active, body_mass=m_b, body_velocity=v1)
