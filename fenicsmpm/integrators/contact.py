@@ -441,6 +441,8 @@ class ExplicitContact:
     def setup(self, sim):
         if sim.layers:
             raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
+        if sim.force_integration != "particles":
+            raise NotImplementedError("ExplicitContact: force_integration='mixed' is not supported")
         if self.algorithm == "penalty":
             if sim.gdim != 2:
                 raise NotImplementedError("ExplicitContact: penalty contact is 2D only")
@@ -489,7 +491,7 @@ class ExplicitContact:
                 if sim.comm.size > 1:
                     mass_b = sim.comm.allreduce(mass_b)
                 for b in loads:
-                    self.rigid[b].start(mass_b[b], sim.gdim)
+                    self.rigid[b].start(mass_b[b], sim.gdim, sim.axisymmetric)
             self._mode = self.normal_mode
             self._n_fixed = np.zeros((nb, sim.gdim))
             self._has_fixed = np.zeros(nb, dtype=np.bool_)
@@ -637,12 +639,19 @@ class ExplicitContact:
         else:
             own = slice(0, grid.n_owned_nodes)
             tot = fc[own].sum(axis=0)
+            added = np.zeros(nb)
             for b in self.rigid:       # reaction of the bodies it pushes at its nodes
-                tot[b] = -fc[own][present[own, b]].sum(axis=(0, 1))
-            self.body_contact_force = sim.comm.allreduce(tot) if sim.comm.size > 1 else tot
+                at = present[own, b]
+                tot[b] = -fc[own][at].sum(axis=(0, 1))
+                touch = np.any(fc[own][at] != 0.0, axis=2)           # (nodes, bodies) in contact
+                added[b] = float(np.sum(m_b[own][at] * touch))
+            if sim.comm.size > 1:
+                tot, added = sim.comm.allreduce(tot), sim.comm.allreduce(added)
+            self.body_contact_force = tot
         for b, law in self.rigid.items():
             if isinstance(law, RigidLoad):
-                law.advance(sim.t, dt, self.body_contact_force[b])
+                law.advance(sim.t, dt, self.body_contact_force[b],
+                            0.0 if self.algorithm == "penalty" else added[b])
         vcm = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
         if sim.robin is not None:
             sim.robin_u += dt * vcm
