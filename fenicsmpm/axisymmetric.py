@@ -41,22 +41,29 @@ def check_radius(x, owner):
 
 
 @njit(cache=True)
-def hoop_strain(nodes, N, w, scale, r, dF):
-    """dF_p,tt = 1 + scale sum_i N_ip w_i,r / r_p."""
+def hoop_strain(nodes, N, field, rigid, w, scale, r, dF):
+    """dF_p,tt = 1 + scale sum_i N_ip w[i, field_p, r] / r_p, with one nodal field per column
+    of w (n_nodes, n_fields, 2): a single column for single-field MPM, one per body in
+    multi-velocity contact (integrators.contact), where rigid bodies keep dF_tt = 1."""
     for p in range(nodes.shape[0]):
+        b = field[p]
+        if rigid[b]:
+            continue
         s = 0.0
         for a in range(nodes.shape[1]):
-            s += N[p, a] * w[nodes[p, a], 0]
+            s += N[p, a] * w[nodes[p, a], b, 0]
         dF[p, 2, 2] = 1.0 + scale * s / r[p]
 
 
 @njit(cache=True)
-def hoop_force(nodes, N, V, stress, r, out):
-    """out_i,r -= V_p stress_p,tt N_ip / r_p (stress: Cauchy, or the step's first Piola)."""
+def hoop_force(nodes, N, field, V, stress, r, out):
+    """out[i, field_p, r] -= V_p stress_p,tt N_ip / r_p (stress: Cauchy, or the step's first
+    Piola; fields as in hoop_strain)."""
     for p in range(nodes.shape[0]):
         c = V[p] * stress[p, 2, 2] / r[p]
+        b = field[p]
         for a in range(nodes.shape[1]):
-            out[nodes[p, a], 0] -= c * N[p, a]
+            out[nodes[p, a], b, 0] -= c * N[p, a]
 
 
 @njit(cache=True)
@@ -90,26 +97,3 @@ def hoop_stiffness(nodes, N, dN, V, A, r, plan, nodeptr, constrained, data):
                         block[k, c] *= V[p]
                 add_block(data, plan[p, a, b], deg, i, nodes[p, b], 2, constrained, block)
 
-
-@njit(cache=True)
-def hoop_strain_bodies(nodes, N, body, rigid, w, scale, r, dF):
-    """hoop_strain with one nodal field per body (w: (n_nodes, n_bodies, 2)); rigid bodies keep
-    dF_tt = 1 (multi-velocity contact, integrators.contact)."""
-    for p in range(nodes.shape[0]):
-        b = body[p]
-        if rigid[b]:
-            continue
-        s = 0.0
-        for a in range(nodes.shape[1]):
-            s += N[p, a] * w[nodes[p, a], b, 0]
-        dF[p, 2, 2] = 1.0 + scale * s / r[p]
-
-
-@njit(cache=True)
-def hoop_force_bodies(nodes, N, body, V, stress, r, out):
-    """hoop_force into each body's field: out[i, body_p, r] -= V_p stress_p,tt N_ip / r_p."""
-    for p in range(nodes.shape[0]):
-        c = V[p] * stress[p, 2, 2] / r[p]
-        b = body[p]
-        for a in range(nodes.shape[1]):
-            out[nodes[p, a], b, 0] -= c * N[p, a]

@@ -21,6 +21,7 @@ from .kernels import shape as ks
 from .kernels import transfer as kt
 
 FORCE_INTEGRATIONS = ("particles", "mixed")
+_NOT_RIGID = np.zeros(1, dtype=np.bool_)
 LEAVE_POLICIES = ("error", "remove", "periodic")
 SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss")
 PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress": "stress",
@@ -131,6 +132,7 @@ class Simulation:
             raise NotImplementedError(f"Simulation: force_integration='mixed' needs shape='mpm', got {shape!r}")
         self.force_integration = force_integration
         self.axisymmetric = grid.axisymmetric
+        self._field = np.zeros(0, dtype=np.int32)
         if self.axisymmetric and (shape not in ("mpm", "ugimp", "cpgimp") or force_integration != "particles"):
             raise NotImplementedError(f"Simulation: axisymmetric grids support shape 'mpm', 'ugimp' "
                                       f"and 'cpgimp' with particle integration, got shape={shape!r}, "
@@ -425,6 +427,8 @@ class Simulation:
         cells, xi = p.cell, p.xi
         if self.axisymmetric:
             self._r = p.x[:, 0].copy()        # start-of-step radius (the step's reference)
+            if len(self._field) != len(p):    # the single nodal field of axi.hoop_*
+                self._field = np.zeros(len(p), dtype=np.int32)
         t1 = time.perf_counter()
         n, nv = len(p), g.cell_nodes.shape[1]
         if n != self._n_alloc:
@@ -533,7 +537,7 @@ class Simulation:
         particle, into out (n, 3, 3); axisymmetric grids add the hoop stretch."""
         kt.incremental_F(self.grid.D, self.nodes, self.dN, w, scale, out)
         if self.axisymmetric:
-            axi.hoop_strain(self.nodes, self.N, w, scale, self._r, out)
+            axi.hoop_strain(self.nodes, self.N, self._field, _NOT_RIGID, w[:, None, :], scale, self._r, out)
 
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
@@ -545,7 +549,7 @@ class Simulation:
         V = p.V if volume is None else volume
         kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, V, stress, np.zeros(self.gdim), out)
         if self.axisymmetric:
-            axi.hoop_force(self.nodes, self.N, V, stress, self._r, out)
+            axi.hoop_force(self.nodes, self.N, self._field, V, stress, self._r, out[:, None, :])
 
     def material_groups(self):
         """(material, particle indices) per material present."""

@@ -538,7 +538,7 @@ class ExplicitContact:
         t0 = time.perf_counter()
         incremental_F_bodies(sim.grid.D, sim.nodes, sim.dN, body, self._is_rigid, v_b, dt, dF)
         if sim.axisymmetric:
-            axi.hoop_strain_bodies(sim.nodes, sim.N, body, self._is_rigid, v_b, dt, sim._r, dF)
+            axi.hoop_strain(sim.nodes, sim.N, body, self._is_rigid, v_b, dt, sim._r, dF)
         sim.timers["constitutive"] += time.perf_counter() - t0
         sim.trial_stress(dF)
         sim.commit(dF)
@@ -594,7 +594,7 @@ class ExplicitContact:
         stress = sim.dynamic_stress(p.stress)
         internal_force_bodies(D, sim.nodes, sim.dN, body, p.V, stress, f_b)
         if sim.axisymmetric:
-            axi.hoop_force_bodies(sim.nodes, sim.N, body, p.V, stress, sim._r, f_b)
+            axi.hoop_force(sim.nodes, sim.N, body, p.V, stress, sim._r, f_b)
         self._acc(grid, f_b)
         f_ext = sim.external_force(sim.t, m, active=active)
         share = (m_b * inv_m[:, None])[:, :, None]        # each body's share of a nodal force
@@ -642,9 +642,9 @@ class ExplicitContact:
             added = np.zeros(nb)
             for b in self.rigid:       # reaction of the bodies it pushes at its nodes
                 at = present[own, b]
-                tot[b] = -fc[own][at].sum(axis=(0, 1))
-                touch = np.any(fc[own][at] != 0.0, axis=2)           # (nodes, bodies) in contact
-                added[b] = float(np.sum(m_b[own][at] * touch))
+                f_at = fc[own][at]                                   # (nodes, bodies, d)
+                tot[b] = -f_at.sum(axis=(0, 1))
+                added[b] = float(np.sum(m_b[own][at] * np.any(f_at != 0.0, axis=2)))
             if sim.comm.size > 1:
                 tot, added = sim.comm.allreduce(tot), sim.comm.allreduce(added)
             self.body_contact_force = tot
