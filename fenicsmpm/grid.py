@@ -72,6 +72,7 @@ class Grid:
         self.structured = self._structured is not None
         self._tree = None
         self._exchange = {}
+        self._max_vec = None
         self.periodic = None     # boundaries.periodic.PeriodicTie, applied by accumulate
         self.axisymmetric = bool(axisymmetric)
         if self.axisymmetric:
@@ -257,6 +258,21 @@ class Grid:
             arr[...] = vec.array.reshape(arr.shape)
         if self.periodic is not None:
             self.periodic.tie(*arrays)
+
+    def reduce_max(self, values, nodes):
+        """The maximum over ranks of per-node values given at local `nodes` (an owned or
+        ghost node shared by ranks gets the largest value any rank has); collective."""
+        from petsc4py import PETSc
+        if self._max_vec is None:
+            self._max_vec = dolfinx.la.create_petsc_vector(self.V.dofmap.index_map, 1)
+        vec = self._max_vec
+        with vec.localForm() as loc:
+            loc.array[:] = -np.inf
+            loc.array[nodes] = values
+        vec.ghostUpdate(addv=PETSc.InsertMode.MAX_VALUES, mode=PETSc.ScatterMode.REVERSE)
+        vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
+        with vec.localForm() as loc:
+            return loc.array[nodes].copy()
 
 
 def vertex_ghost_partitioner(partitioner=None):

@@ -283,15 +283,21 @@ class Simulation:
         self.grid.periodic = PeriodicTie(self.grid, axis)
         return self.grid.periodic
 
-    def add_friction(self, where, mu, normal):
-        """A rigid, flat frictional boundary on the grid nodes where(x) with outward unit normal
-        `normal` and Coulomb coefficient `mu` (boundaries.friction; seed 002 §5.1): no
-        penetration, separation allowed, stick or slip. Explicit integrators only; do not also
-        `fix` the normal component there."""
+    def add_friction(self, where, mu, normal=None):
+        """A rigid frictional boundary on the grid nodes where(x) with Coulomb coefficient `mu`
+        and outward unit normal `normal` (a vector), or, with normal=None, the normals of the
+        mesh facets where(x) selects (inclined and curved bases); boundaries.friction, seed 002
+        §5.1: unilateral contact decided by the gap between the particles and the base, stick
+        or slip. Explicit integrators (fm.Explicit, fm.ExplicitContact) only; do not also
+        `fix` the normal component there. Returns the boundary: its `reaction()` (collective)
+        is the force the material exerted on it in the last step."""
         if not getattr(self.integrator, "supports_friction", False):
-            raise NotImplementedError(f"add_friction: frictional boundaries need fm.Explicit, "
-                                      f"not {type(self.integrator).__name__}")
-        self.frictions.append(FrictionalBoundary(where, mu, normal).bind(self.grid))
+            raise NotImplementedError(f"add_friction: frictional boundaries need fm.Explicit or "
+                                      f"fm.ExplicitContact, not {type(self.integrator).__name__}; "
+                                      f"in implicit runs fix the base (sim.fix) instead")
+        fr = FrictionalBoundary(where, mu, normal).bind(self.grid)
+        self.frictions.append(fr)
+        return fr
 
     def enable_splitting(self, alpha=2.0, beta=0.5, gamma=1.0, every=1):
         """Split particles whose voxel stretched beyond alpha, shrank below beta or sheared

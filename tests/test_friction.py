@@ -70,5 +70,5 @@ def test_friction_input_validation():
         sim.add_friction(lambda x: np.isclose(x[:, 1], 0.0), 0.3, (0.0, 0.0, -1.0))
     with pytest.raises(ValueError, match="matches no grid node"):
         sim.add_friction(lambda x: x[:, 1] < -1.0, 0.3, (0.0, -1.0))
-    with pytest.raises(NotImplementedError, match="need fm.Explicit, not Newmark"):
+    with pytest.raises(NotImplementedError, match="need fm.Explicit or fm.ExplicitContact, not Newmark"):
         fm.Simulation(grid, p, fm.Newmark(), dt=1e-3).add_friction(lambda x: x[:, 1] < 1e-9, 0.3, (0, -1))

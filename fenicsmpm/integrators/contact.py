@@ -520,18 +520,32 @@ class ExplicitContact:
                 v[:, b, :] = np.where(self._present[:, b, None], vr[b], 0.0)
         return v
 
-    def _contact(self, sim, v_b, dt, fc):
+    def _contact(self, sim, v_b, dt, fc, trial):
         if self.nb > 1 and self.algorithm == "multi-velocity":
             multi_velocity_contact(self._present, self._m_b, self._gm_b, self._is_rigid,
                                    self._mu, self._mode, self._n_fixed, self._has_fixed, self._xm_b,
                                    self._rm_b, self._gap, dt, v_b, fc)
-        if sim.frictions:
-            for b in range(self.nb):
-                if not self._is_rigid[b]:
-                    vb = np.ascontiguousarray(v_b[:, b, :])
-                    for fr in sim.frictions:
-                        fr.apply(vb)
-                    v_b[:, b, :] = vb
+        self._friction(sim, v_b, dt, "apply" if trial else "hold")
+
+    def _friction_gaps(self, sim, body):
+        """Gaps of every frictional boundary to each deformable body (boundaries.friction);
+        collective."""
+        self._fgaps = {b: [fr.gaps(sim, np.flatnonzero(body == b)) for fr in sim.frictions]
+                       for b in range(self.nb) if not self._is_rigid[b]}
+
+    def _friction(self, sim, v_b, dt, action):
+        """Frictional rigid boundaries act on every deformable body's field, with one contact
+        status per body and boundary: `apply` to the trial velocities (deciding the contact;
+        reaction summed over bodies), `hold` on a velocity the stress update sees."""
+        for k, fr in enumerate(sim.frictions):
+            for n, (b, gaps) in enumerate(self._fgaps.items()):
+                status = fr.body_status.setdefault(b, np.zeros(len(fr.nodes), dtype=np.int8))
+                vb = np.ascontiguousarray(v_b[:, b, :])
+                if action == "apply":
+                    fr.apply(vb, gaps[k], dt, self._m_b[:, b], status, add=n > 0)
+                else:
+                    fr.hold(vb, gaps[k], dt, status)
+                v_b[:, b, :] = vb
 
     def _stress_update(self, sim, body, v_b, dt):
         dF = sim._dF
@@ -556,6 +570,7 @@ class ExplicitContact:
         D, d = grid.D, sim.gdim
         sim.locate_and_shape()
         body = self._bodies(sim)                     # after migration
+        self._friction_gaps(sim, body)
         nb, nn = self.nb, grid.n_nodes
         t0 = time.perf_counter()
         m_b = np.zeros((nn, nb))
@@ -587,8 +602,12 @@ class ExplicitContact:
         free = ~sim.fixed
         v0 = self._velocities(sim, mv_b, inv_mb, free, sim.t)
         T["solve"] += time.perf_counter() - t0
-        if self.scheme in ("USF", "AVG"):
-            self._stress_update(sim, body, v0, dt if self.scheme == "USF" else 0.5 * dt)
+        if self.scheme in ("USF", "AVG"):            # the stress sees the held v0
+            v0c = v0
+            if sim.frictions:
+                v0c = v0.copy()
+                self._friction(sim, v0c, dt, "hold")
+            self._stress_update(sim, body, v0c, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f_b = np.zeros((nn, nb, d))
         stress = sim.dynamic_stress(p.stress)
@@ -611,7 +630,7 @@ class ExplicitContact:
         else:
             fc = np.zeros((nn, nb, d))
         v1 = self._velocities(sim, mv_b + dt * f_b, inv_mb, free, sim.t + dt)
-        self._contact(sim, v1, dt, fc)
+        self._contact(sim, v1, dt, fc, trial=True)
         vcm1 = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
         sim.record_work(f_ext, f_robin, vcm0, vcm1, dt)
         t2 = time.perf_counter()
@@ -629,7 +648,7 @@ class ExplicitContact:
             p2g_weighted_bodies(D, sim.nodes, sim.N, body, p.mass, p.v, mv2)
             self._acc(grid, mv2)
             v1 = self._velocities(sim, mv2, inv_mb, free, sim.t + dt)
-            self._contact(sim, v1, dt, np.zeros_like(fc))
+            self._contact(sim, v1, dt, np.zeros_like(fc), trial=False)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             self._stress_update(sim, body, v1, dt if self.scheme != "AVG" else 0.5 * dt)

@@ -40,11 +40,17 @@ class Explicit:
         """v_i = (m v)_i / m_i on active nodes, 0 on inactive nodes and fixed components."""
         return momentum * inv_m[:, None] * free
 
-    @staticmethod
-    def _contact(sim, v):
-        """Frictional boundaries project the nodal velocities (boundaries.friction)."""
-        for b in sim.frictions:
-            b.apply(v)
+    def _contact(self, sim, v, dt, mass):
+        """Frictional boundaries project the trial nodal velocities v in place for the gaps of
+        the start of the step and decide the contact (boundaries.friction)."""
+        for b, g in zip(sim.frictions, self._gaps):
+            b.apply(v, g, dt, mass)
+
+    def _hold(self, sim, v, dt):
+        """A velocity the stress update sees keeps the contact the trial projection decided
+        (the previous step's for USF's start-of-step velocity)."""
+        for b, g in zip(sim.frictions, self._gaps):
+            b.hold(v, g, dt)
 
     def _stress_update(self, sim, v_grid, dt):
         dF = sim._dF
@@ -58,6 +64,7 @@ class Explicit:
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
         t0 = time.perf_counter()
+        self._gaps = [b.gaps(sim) for b in sim.frictions]
         m, mv = sim.nodal_mass_momentum()
         grid.accumulate(m, mv)
         T["p2g"] += time.perf_counter() - t0
@@ -67,8 +74,12 @@ class Explicit:
         free = ~sim.fixed
         v0 = self._grid_velocity(mv, inv_m, free)
         T["solve"] += time.perf_counter() - t0
-        if self.scheme in ("USF", "AVG"):
-            self._stress_update(sim, v0, dt if self.scheme == "USF" else 0.5 * dt)
+        if self.scheme in ("USF", "AVG"):                # the stress sees the projected v0
+            v0c = v0
+            if sim.frictions:
+                v0c = v0.copy()
+                self._hold(sim, v0c, dt)
+            self._stress_update(sim, v0c, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
@@ -82,10 +93,14 @@ class Explicit:
         v1 = v0 + dt * f * inv_m[:, None] * free
         if sim.frictions:                           # contact force m (v1 - v1_trial) / dt
             v_trial = v1.copy()
-            self._contact(sim, v1)
+            self._contact(sim, v1, dt, m)
             fc = m[:, None] * (v1 - v_trial) / dt
             fr = fc if fr is None else fr + fc
-        sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
+        v0w = v0
+        if sim.frictions and sim.monitoring_work:  # contact nodes count as fixed nodes do
+            v0w = v0.copy()
+            self._hold(sim, v0w, dt)
+        sim.record_work(f_ext, fr, v0w, v1, dt)     # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
@@ -96,7 +111,7 @@ class Explicit:
             mv2 = sim.nodal_weighted(p.v)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
-            self._contact(sim, v1)
+            self._hold(sim, v1, dt)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             self._stress_update(sim, v1, dt if self.scheme != "AVG" else 0.5 * dt)
