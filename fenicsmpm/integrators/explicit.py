@@ -73,13 +73,11 @@ class Explicit:
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
         free = ~sim.fixed
         v0 = self._grid_velocity(mv, inv_m, free)
+        if sim.frictions:                # nodes in contact start as fixed nodes do (last status)
+            self._hold(sim, v0, dt)
         T["solve"] += time.perf_counter() - t0
-        if self.scheme in ("USF", "AVG"):                # the stress sees the projected v0
-            v0c = v0
-            if sim.frictions:
-                v0c = v0.copy()
-                self._hold(sim, v0c, dt)
-            self._stress_update(sim, v0c, dt if self.scheme == "USF" else 0.5 * dt)
+        if self.scheme in ("USF", "AVG"):
+            self._stress_update(sim, v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
@@ -96,11 +94,7 @@ class Explicit:
             self._contact(sim, v1, dt, m)
             fc = m[:, None] * (v1 - v_trial) / dt
             fr = fc if fr is None else fr + fc
-        v0w = v0
-        if sim.frictions and sim.monitoring_work:  # contact nodes count as fixed nodes do
-            v0w = v0.copy()
-            self._hold(sim, v0w, dt)
-        sim.record_work(f_ext, fr, v0w, v1, dt)     # fixed components: v0 = v1 = 0
+        sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
