@@ -33,8 +33,9 @@ p_t = 1.6 kPa = 1600 Pa).
 Stress-free and tension states (the rule at p -> 0): the model sees the shifted stress
 sigma_t = sigma - p_t I (the UMAT's cohesion shift).  A state is admissible when every principal
 value of sigma_t is <= -p_min / 2 (compression); there L, N and F are finite.  The stress that
-enters a step, and any sub-step result that would leave the admissible set after the sub-step
-size has been cut to h_min, is projected: principal values of sigma_t are capped at -p_min
+enters a step, and any sub-step that would leave the admissible set once the sub-step size has
+been cut to h_min = 1e-4 of the step (the rest of the step is then one explicit Euler step), is
+projected: principal values of sigma_t are capped at -p_min
 (eigenvectors kept), i.e. sigma_i <= p_t - p_min.  A granular body pulled apart therefore sits at
 the isotropic state sigma = (p_t - p_min) I and carries no shear, and no NaN arises.
 Default p_min = p_t / 4 (the UMAT's `minstress`).
@@ -71,7 +72,9 @@ _VJ = np.array([0, 1, 2, 1, 2, 2], dtype=np.int64)
 _SQ2 = math.sqrt(2.0)
 _SQ3 = math.sqrt(3.0)
 _SQ6 = math.sqrt(6.0)
-_HMIN = 1e-4          # smallest sub-step (fraction of the step) before the projection rule
+_HMIN = 1e-4          # sub-step (fraction of the step) below which an inadmissible stage
+                      # triggers the projection rule
+_HERR = 1e-12         # sub-step accepted whatever its error estimate
 _MAXSUB = 4000        # sub-steps per particle and step before the remainder is projected
 
 
@@ -226,13 +229,13 @@ def _integrate(s, d, e0, D, par, tol, hseq, nfix, W):
                 break
             h = hseq[nsub]
         h = min(h, 1.0 - T)
-        forced = nsub >= _MAXSUB - 1 or (nfix == 0 and h <= _HMIN)
-        if nsub >= _MAXSUB - 1:
+        forced = nfix == 0 and nsub >= _MAXSUB - 1
+        if forced:                     # the remainder as one projected Euler step
             h = 1.0 - T
         e1 = (1.0 + e0) * math.exp(T * trD) - 1.0
         e2 = (1.0 + e0) * math.exp((T + 0.5 * h) * trD) - 1.0
         e3 = (1.0 + e0) * math.exp((T + h) * trD) - 1.0
-        ok = _rates(s, d, e1, D, par, sh, k1s, k1d)
+        ok = _rates(s, d, e1, D, par, sh, k1s, k1d) and not forced
         if ok:
             for i in range(3):
                 for j in range(3):
@@ -260,14 +263,17 @@ def _integrate(s, d, e0, D, par, tol, hseq, nfix, W):
             err = max(math.sqrt(es) / max(math.sqrt(sc), par[_PMIN]),
                       math.sqrt(ed) / par[_R])
             ok = _admissible(hs_, par) and err == err
-        if ok and (err <= tol or nfix > 0 or forced):
+        if ok and (err <= tol or nfix > 0 or h <= _HERR):
             for i in range(3):
                 for j in range(3):
                     s[i, j] = hs_[i, j]
                     d[i, j] = hd_[i, j]
             _cap_delta(d, par[_R])
-        elif forced or nfix > 0:
-            # projection rule: explicit Euler step (k1 from the admissible start), then cap
+        elif forced or nfix > 0 or (not ok and h <= _HMIN):
+            # projection rule: the remainder of the step as one explicit Euler step (k1 from the
+            # admissible start), then the cap
+            if nfix == 0:
+                h = 1.0 - T
             for i in range(3):
                 for j in range(3):
                     s[i, j] += h * k1s[i, j]
