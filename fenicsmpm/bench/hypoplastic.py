@@ -46,6 +46,8 @@ def _reversal(m):
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
+    """Every element test (quick: 4x larger strain increments), JSON, table and PNG; returns
+    the result dict (common.result)."""
     from mpi4py import MPI
     comm = MPI.COMM_WORLD if comm is None else comm
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
@@ -70,7 +72,8 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     def crit(h):
         a, b = _critical(m, h)
         return dict(critical_ratio_error=a, critical_void_error=b,
-                    peak_ratio=float(np.max(h["q"] / (h["p"] + m.p_t)) / m.M_c))
+                    peak_ratio=float(np.max(h["q"] / (h["p"] + m.p_t)) / m.M_c),
+                    eps_v_end=float(h["eps_v"][-1]))
 
     record("triaxial-dense", lambda: triaxial(m, 100e3, e0=0.60, axial_strain=-2.0, n=2000 // k),
            dict(test="drained triaxial", e0=0.60, p0=100e3, axial_strain=-2.0), crit)
@@ -128,14 +131,15 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
 
 
 def _plot(m, paths, rev, doc, out, comm):
-    fig, ax = common.new_figure(3, 2, size=(13.0, 7.5))
+    """Stress ratio and volumetric strain of the triaxial tests, the seed's biaxial q(eps_yy),
+    isotropic paths with e_d, e_c, e_i (eq 3.15), oedometer, cyclic shear."""
+    fig, ax = common.new_figure(3, 2, size=(4.6, 3.6))
     for name, c in (("triaxial-dense", "tab:red"), ("triaxial-loose", "tab:blue")):
         h = paths[name]
-        ax[0, 0].plot(-h["eps_a"], h["q"] / (h["p"] + m.p_t), color=c, label=name)
-        ax[1, 0].plot(-h["eps_a"], h["eps_v"], color=c, label=name)
+        ax[0, 0].semilogx(-h["eps_a"][1:], (h["q"] / (h["p"] + m.p_t))[1:], color=c, label=name)
+        ax[1, 0].semilogx(-h["eps_a"][1:], h["eps_v"][1:], color=c, label=name)
     ax[0, 0].axhline(m.M_c, color="k", ls=":", label="M_c")
-    ax[0, 0].set_xscale("symlog", linthresh=0.01)
-    ax[1, 0].set_xscale("symlog", linthresh=0.01)
+    ax[1, 0].set_xlabel("axial strain -eps_yy (sum of increments)")
     ax[0, 0].set_ylabel("q / (p + p_t)")
     ax[1, 0].set_ylabel("eps_v (dilation > 0)")
     h = paths["biaxial-seed"]

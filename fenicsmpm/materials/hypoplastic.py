@@ -411,6 +411,7 @@ def hypoplastic_tensors_kernel(sigma, e, par, L, N):
 
 
 def _range_error(name, value, rng):
+    """The ValueError for a parameter outside its range (names both)."""
     return ValueError(f"Hypoplastic: parameter '{name}' must satisfy {rng}, got {value!r}")
 
 
@@ -436,10 +437,13 @@ class Hypoplastic:
                  expected; default 1e6)
         tol      relative error tolerance of the RK2(3) sub-stepping, 0 < tol <= 0.1
     History: state[:, 0] = e, state[:, 1:7] = delta (11, 22, 33, 12, 13, 23).
+    `stats` counts (accepted sub-steps, projections by the p -> 0 rule, particle updates) over
+    all `stress` calls.
     """
 
     name = "Hypoplastic"
     n_state = 7
+    state_columns = STATE_COLUMNS
 
     def __init__(self, phi_c, h_s, n, e_d0, e_c0, e_i0, alpha, beta, m_R, m_T, R, beta_r, chi,
                  density, e_0, p_t=0.0, p_min=None, delta_0=None, p_max=1e6, tol=1e-4):
@@ -507,6 +511,7 @@ class Hypoplastic:
         self.stats = np.zeros(3, dtype=np.int64)    # sub-steps, projections, particle updates
 
     def __getattr__(self, name):
+        """The validated parameters as attributes (m.phi_c, m.R, m.p_t, ...)."""
         params = self.__dict__.get("params", {})
         if name in params:
             return params[name]
@@ -542,18 +547,17 @@ class Hypoplastic:
                              f"{np.ravel(p)[k]:.4g} Pa, got {np.ravel(e)[k]!r}")
 
     def constrained_modulus(self, p, e=None):
-        """E_c of seed eqs 3.26-3.30 at isotropic stress p [Pa]: L = f_b f_e (3 + a^2/3),
-        N = a f_b f_d f_e; the largest branch, max(m_R L, L + N) (rho = 0 after a reversal,
-        rho = 1 loading).  e: None for the stiffest admissible state e = e_d(p), where f_d = 0."""
+        """E_c of seed eqs 3.26-3.30 at isotropic stress p [Pa] (sigma_t = -(p + p_t) I):
+        L = f_b f_e (3 + a^2/3); the largest branch of eq 3.30 is m_R L (rho = 0, or any 180
+        degree reversal); loading at rho = 1 gives L - N with N = a f_b f_d f_e (eq 3.29: the
+        '+ rho^chi N' printed in eq 3.30 carries the sign of the tension-positive N of eq 3.6
+        for D = -e_yy).  e: None for the stiffest admissible state e = e_d(p)."""
         v = self.params
         ps = 3.0 * (p + v["p_t"]) / v["h_s"]
         ed, ec, ei = self.characteristic_void_ratios(p)
         e = ed if e is None else e
         fb = self._par[_FB0] * (1.0 + ei) / ei * ps ** (1.0 - v["n"])
-        fe = (ec / e) ** v["beta"]
-        fd = np.where(e > ed, (np.maximum(e - ed, 0.0) / (ec - ed)) ** v["alpha"], 0.0)
-        L = fb * fe * (3.0 + self.a ** 2 / 3.0)
-        return np.maximum(v["m_R"] * L, L + self.a * fb * fd * fe)
+        return v["m_R"] * fb * (ec / e) ** v["beta"] * (3.0 + self.a ** 2 / 3.0)
 
     @property
     def p_wave_speed(self):
