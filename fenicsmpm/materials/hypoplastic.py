@@ -20,20 +20,21 @@ Rate equation (objective Jaumann rate, seed eqs 3.1-3.4, 3.21-3.22):
         M = [rho^chi m_T + (1 - rho^chi) m_R] L
             + rho^chi (1 - m_T) (L:d) (x) d + rho^chi N (x) d   if d:D > 0
             + rho^chi (m_R - m_T) (L:d) (x) d                  if d:D <= 0             (3.22)
-Printed errors of seed 004 corrected here against von Wolffersdorff (1996, eqs 4-12), Niemunis &
-Herle (1997, eqs 14-19) and the public soilmodels.info UMAT (Gudehus et al. 2008; Masin,
-Tamagnini et al.): eq 3.5 reads a^2 s_ij s_kl (not s_ik s_jl); eq 3.10 has tan psi/(2 sqrt 2)
+Printed errors of seed 004 corrected here against von Wolffersdorff (1996), Niemunis & Herle
+(1997) and the public soilmodels.info UMAT (Gudehus et al. 2008; Masin, Tamagnini, Sellari; the
+copy in Kratos' UmatApplication): eq 3.5 reads a^2 s_ij s_kl (not s_ik s_jl); eq 3.10 has tan psi/(2 sqrt 2)
 outside the root; eq 3.12 uses the deviator s*; eq 3.16 reads (s + s*); eq 3.23 reads
 N_ij d_kl (not N_ik d_jl).  m_R and m_T are input parameters (eq 3.24 is a clay formula; eq
-3.25 parametrises m_T by a ratio); rho is capped at 1 as in the UMAT.
+3.25 parametrises m_T by a ratio); rho is capped at 1 as in the UMAT; for E_c of eq 3.30 see
+Hypoplastic.constrained_modulus.
 
 Units: h_s and p_t in Pa (the seed's Table 3.1 is in kPa: h_s = 5.8E6 kPa = 5.8e9 Pa,
 p_t = 1.6 kPa = 1600 Pa).
 
 Stress-free and tension states (the rule at p -> 0): the model sees the shifted stress
 sigma_t = sigma - p_t I (the UMAT's cohesion shift).  A state is admissible when every principal
-value of sigma_t is <= -p_min / 2 (compression); there L, N and F are finite.  The stress that
-enters a step, and any sub-step that would leave the admissible set once the sub-step size has
+value of sigma_t is <= -p_min / 2 (compression); there L, N and F are finite.  A stress that
+enters a step outside this set, and any sub-step that would leave the admissible set once the sub-step size has
 been cut to h_min = 1e-4 of the step (the rest of the step is then one explicit Euler step), is
 projected: principal values of sigma_t are capped at -p_min
 (eigenvectors kept), i.e. sigma_i <= p_t - p_min.  A granular body pulled apart therefore sits at
@@ -91,7 +92,7 @@ def _ddot(A, B):
 @numba.njit(cache=True)
 def _factors(s, e, par, sh):
     """Normalised stress sh = sigma_t / tr sigma_t (seed eq 3.7, sigma_t = sigma - p_t I) and
-    (fs, F, f_d) with fs = f_b f_e / (sh:sh) (eqs 3.9-3.15, von Wolffersdorff 1996 eqs 4-12);
+    (fs, F, f_d) with fs = f_b f_e / (sh:sh) (eqs 3.9-3.15 corrected, von Wolffersdorff 1996);
     fs = -1 when tr sigma_t >= 0 (no hypoplastic state)."""
     pt = par[_PT]
     tr = s[0, 0] + s[1, 1] + s[2, 2] - 3.0 * pt
@@ -129,7 +130,7 @@ def _factors(s, e, par, sh):
 
 @numba.njit(cache=True)
 def _rates(s, d, e, D, par, sh, ds, dd):
-    """ds = M : D (seed eqs 3.21-3.22, Niemunis & Herle 1997 eq 17) and dd = delta rate
+    """ds = M : D (seed eqs 3.21-3.22, Niemunis & Herle 1997) and dd = delta rate
     (eq 3.18) at stress s, intergranular strain d, void ratio e; False if tr sigma_t >= 0."""
     fs, F, fd = _factors(s, e, par, sh)
     if fs < 0.0:
