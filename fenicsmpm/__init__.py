@@ -9,6 +9,7 @@
 from .grid import Grid
 from .particles import Particles
 from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
+from .materials import Hypoplastic
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
 from .integrators import ExplicitContact, RigidLoad, set_body
@@ -44,3 +45,4 @@ __all__ = ["Grid", "Particles", "Hencky", "LinearElastic", "NeoHookean", "MohrCo
 __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
 __all__ += ["CompliantBase", "InputMotion", "compliant_base", "rigid_base"]
 __all__ += ["ExplicitContact", "RigidLoad", "set_body"]
+__all__ += ["Hypoplastic"]

@@ -14,11 +14,12 @@ Interface of a material (see LinearElastic):
     density, p_wave_speed        for masses and the critical time step
 """
 from .hencky import Hencky
+from .hypoplastic import Hypoplastic
 from .linear_elastic import LinearElastic
 from .mohr_coulomb import MohrCoulomb
 from .neo_hookean import NeoHookean
 from .von_mises import VonMises
 from .piola import first_piola, first_piola_tangent, strain_energy_increment
 
-__all__ = ["Hencky", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
+__all__ = ["Hencky", "Hypoplastic", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
            "first_piola_tangent", "strain_energy_increment"]
