@@ -11,7 +11,7 @@ from .particles import Particles
 from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
-from .integrators import ExplicitContact, RigidLoad, set_body
+from .contact import ExplicitContact, RigidLoad, set_body
 from .integrators import DoubleMappingNewmark, DoubleMappingQuasiStatic
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .boundaries import CompliantBase, InputMotion, compliant_base, rigid_base

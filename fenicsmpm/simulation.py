@@ -8,16 +8,16 @@ import warnings
 
 import numpy as np
 
-from . import axisymmetric as axi
+from .kernels import axisymmetric as axi
 from .boundaries import ParticleLayer, Robin, RobinForms, Traction, TractionForms, fixed_dofs
 from .boundaries import particle_layer as kl
 from .boundaries.friction import FrictionalBoundary
 from .boundaries.robin import facets_on_boundary
 from .guards import ParticlesLeftMesh, check_particles
-from .smoothing import smoothed_stress
+from .kernels.smoothing import smoothed_stress
 from .splitting import Splitting
 from .io import ParticleWriter, Progress, ProbeWriter
-from .kernels import shape as ks
+from .shapes import standard as ks
 from .kernels import transfer as kt
 
 FORCE_INTEGRATIONS = ("particles", "mixed")
@@ -52,19 +52,19 @@ class Simulation:
     gravity_ramp: None, or a time T: gravity grows smoothly over the first T/2 of the stage,
     g(t) = g [sin(2 pi t / T - pi / 2) + 1] / 2 (seed 002 eq 4.13), then stays at g.
     stress_feedback: None, or "smoothed": explicit runs compute the internal force from the
-    grid-smoothed stress (fenicsmpm.smoothing, seed 002 eqs 4.18-4.19) instead of the
+    grid-smoothed stress (fenicsmpm.kernels.smoothing, seed 002 eqs 4.18-4.19) instead of the
     particle stress; the constitutive update still acts on the particle stress.
     shape: the shape-function family, one of SHAPES: "mpm" (the Lagrange basis of the
-    particle's cell), "ugimp"/"cpgimp" (kernels.gimp: structured quadrilateral/hexahedral
-    grids), "cpdi1"/"cpdi2" (kernels.cpdi: any 2D P1/Q1 mesh), "gauss" (kernels.gauss_gimp:
+    particle's cell), "ugimp"/"cpgimp" (shapes.gimp: structured quadrilateral/hexahedral
+    grids), "cpdi1"/"cpdi2" (shapes.cpdi: any 2D P1/Q1 mesh), "gauss" (shapes.gauss_gimp:
     deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
     P1/Q1 mesh). The wider families need, in
     parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(); implicit
     integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings).
     force_integration: "particles" (the internal force as a particle sum), or "mixed" (MPM
-    with Gauss-point integration of the internal force, fenicsmpm.mixed_integration).
+    with Gauss-point integration of the internal force, fenicsmpm.integrators.mixed_integration).
     Axisymmetric analysis is a property of the grid (fm.Grid(mesh, axisymmetric=True),
-    fenicsmpm.axisymmetric): hoop terms are added to the strain, force and tangent, and the
+    fenicsmpm.kernels.axisymmetric): hoop terms are added to the strain, force and tangent, and the
     radial displacement of nodes on the axis r = 0 is fixed."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
@@ -149,13 +149,13 @@ class Simulation:
         self.shape = shape
         self._wide = None                            # GIMP/CPDI evaluator; None for "mpm"
         if shape in ("ugimp", "cpgimp"):
-            from .kernels.gimp import GimpShape
+            from .shapes.gimp import GimpShape
             self._wide = GimpShape(self, contiguous=shape == "cpgimp")
         elif shape in ("cpdi1", "cpdi2"):
-            from .kernels.cpdi import CpdiShape
+            from .shapes.cpdi import CpdiShape
             self._wide = CpdiShape(self, version=int(shape[-1]))
         elif shape == "gauss":
-            from .kernels.gauss_gimp import GaussGimpShape
+            from .shapes.gauss_gimp import GaussGimpShape
             self._wide = GaussGimpShape(self)
         integrator.setup(self)
 
@@ -543,7 +543,7 @@ class Simulation:
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
         p = self.particles
         if self.force_integration == "mixed":
-            from .mixed_integration import internal_force as mixed_force
+            from .integrators.mixed_integration import internal_force as mixed_force
             mixed_force(self, stress, out, volume)
             return
         V = p.V if volume is None else volume

@@ -1,4 +1,4 @@
-"""Site response (BENCHMARKS.md P1; fenicsmpm.site_response, boundaries.base_motion).
+"""Site response (BENCHMARKS.md P1; fenicsmpm.problems.soil_column, boundaries.base_motion).
 Serial and `mpirun -n 2`.
 
 P1 column: H = 10 m, E = 1e4 kPa, nu = 0.33, unit weight 18.5 kN/m^3 (V_s = 44.65 m/s,
@@ -15,7 +15,7 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm import site_response as sr
+from fenicsmpm.problems import soil_column as sr
 
 comm = MPI.COMM_WORLD
 T_END, DX = 20.0, 0.25

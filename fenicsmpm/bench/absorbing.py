@@ -5,7 +5,7 @@ and wall time against cell size and Courant number. W3: the 20 m column under th
 scaled to 300 kPa (large deformation): fixed base, mesh-boundary dashpots and a
 particle-layer dashpot whose mesh extends below the material.
 
-W1 scene (fenicsmpm.absorbing_column): H = 100 m, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3,
+W1 scene (fenicsmpm.problems.absorbing_column): H = 100 m, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3,
 side rollers, p(t) = 0.375 / (a sqrt(pi)) exp(-((t - t0) / a)^2) kPa (t0 = 0.05 s,
 a = 0.021 s), 2x2 particles per cell. Bases:
   fixed         Dirichlet (all components of the base nodes),
@@ -157,7 +157,7 @@ def scenes(quick=False, tiny=False):
 
 def w3_load(t):
     """The W3 surface pressure [Pa]: the W1 pulse scaled to a 300 kPa peak."""
-    from ..absorbing_column import A, T0
+    from ..problems.absorbing_column import A, T0
     return W3_PEAK * math.exp(-((t - T0) / A) ** 2)
 
 
@@ -168,7 +168,7 @@ def w3_column(integrator, method, dx, width, dt, comm):
     W3_BELOW below it; the load acts on the top particle row (sim.add_particle_load)."""
     import fenicsmpm as fm
     from dolfinx import mesh as dmesh
-    from ..absorbing_column import A, E, NU, RHO, T0
+    from ..problems.absorbing_column import A, E, NU, RHO, T0
     H = W3_HEIGHT
     nb = int(round(W3_BELOW / dx)) if method == "layer" else 0
     na = int(round(W3_ABOVE / dx))
@@ -205,7 +205,7 @@ def _layer_column(integ, spec, width, dt, comm):
     """W1 column with a particle-layer base: the fixed-base column, base released, side
     rollers fixed again, and fm.ParticleLayer on the lowest particle row."""
     import fenicsmpm as fm
-    from ..absorbing_column import absorbing_column
+    from ..problems.absorbing_column import absorbing_column
     dx = spec["dx"]
     sim, exact = absorbing_column(integ, base="fixed", dx=dx, width=width, dt=dt,
                                   depths=(50.0, 100.0), comm=comm)
@@ -219,7 +219,7 @@ def _layer_column(integ, spec, width, dt, comm):
 
 def run_scene(spec, quick, comm):
     import fenicsmpm as fm
-    from ..absorbing_column import absorbing_column, histories, summary
+    from ..problems.absorbing_column import absorbing_column, histories, summary
     dx, c = spec["dx"], spec["courant"]
     w3 = spec["bench"] == "W3"
     width = dx if quick else max(dx, 1.0)

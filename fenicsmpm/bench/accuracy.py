@@ -57,7 +57,7 @@ LOAD_STEPS = 5
 PER_CELL = 2
 # V1 amplitudes: 0.01 keeps the free-end particle (displacement amplitude v0 / w = 6.4e-4)
 # inside its cell on every mesh up to n = 160 (h / 4 = 1.6e-3), so the errors are those of the
-# discretization; 0.1 (the default of verification.vibrating_bar, used by the tests and the
+# discretization; 0.1 (the default of problems.elastic.vibrating_bar, used by the tests and the
 # demo) moves it by 6.4e-3, more than h / 4 from n = 40 on: it then crosses into the empty
 # cell beyond the bar (standard MPM's cell-crossing error at a free surface).
 V1_AMPLITUDES = (0.01, 0.1)
@@ -159,7 +159,7 @@ def run_v2(n_cells, comm, repeats=1):
 
 
 def _run_v1(series, n_cells, comm, periods, v0):
-    from ..verification import vibrating_bar
+    from ..problems.elastic import vibrating_bar
     integ = _integrator(series)
     t0 = time.perf_counter()
     sim, exact = vibrating_bar(integ, n_cells=n_cells, per_cell=PER_CELL, cfl=CFL, v0=v0,
@@ -210,7 +210,7 @@ def _run_v1(series, n_cells, comm, periods, v0):
 
 def _run_v2(n_cells, comm):
     from mpi4py import MPI
-    from ..verification import self_weight_column
+    from ..problems.elastic import self_weight_column
     integ = _integrator("QuasiStatic")
     t0 = time.perf_counter()
     sim, exact = self_weight_column(integ, n_cells=n_cells, per_cell=PER_CELL, comm=comm, **V2)
@@ -245,7 +245,7 @@ def _run_v2(n_cells, comm):
 
 def _warm_up(comm):
     """Untimed short runs of each integrator: numba's cached kernels are loaded here."""
-    from ..verification import self_weight_column, vibrating_bar
+    from ..problems.elastic import self_weight_column, vibrating_bar
     for series in ("explicit-MUSL", "Newmark"):
         integ = _integrator(series)
         sim, _ = vibrating_bar(integ, n_cells=4, per_cell=PER_CELL, cfl=CFL, comm=comm)

@@ -1,5 +1,5 @@
 """Benchmark case `axisymmetric`: the thick cylinder under internal pressure
-(fenicsmpm.verification_cylinder), error against cell size and wall time.
+(fenicsmpm.problems.cylinder), error against cell size and wall time.
 
 Runs: "lame" (linear elastic, Lame solution: the cell-mean sigma_rr error relative to p,
 sigma_tt and u_r relative errors) and "hill" (Mohr-Coulomb phi = 0, plastic to rho = 1.5 b/2:
@@ -11,7 +11,7 @@ import os
 import numpy as np
 
 from . import common
-from .. import verification_cylinder as vc
+from ..problems import cylinder as vc
 
 CASE = "axisymmetric"
 P, E, NU, C, RHO = 1.0e4, 1.0e8, 0.3, 1.0e4, 1.5

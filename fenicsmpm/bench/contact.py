@@ -83,7 +83,7 @@ def incline(theta_deg, mu, algorithm="multi-velocity", h=0.4, ppc=2, t_end=1.0, 
             opts.setdefault("penalty", dict(k_n=(K_CYL + 4 * G_CYL / 3) / h))
         integ = fm.ExplicitContact(scheme, mu=mu, **opts)
         if algorithm == "penalty":
-            from ..integrators.penalty_contact import circle, line
+            from ..contact.penalty import circle, line
             integ.add_polyline(0, circle((xc, yc), R, round(2 * math.pi * R / SEGMENT)), closed=True)
             integ.add_polyline(1, line((L, PLANE_T), (0.0, PLANE_T), round(L / SEGMENT)))
     elif algorithm == "single-field":

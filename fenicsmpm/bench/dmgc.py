@@ -7,7 +7,7 @@ DM-GC is a small-strain technique here: on the large-deformation V2 column Newto
 import os
 
 from . import common
-from ..integrators.dmgc import self_weight_errors
+from ..problems.elastic import self_weight_errors
 
 CASE = "dmgc"
 SIZES = {"quick": (5, 10, 20), "full": (5, 10, 20, 40)}

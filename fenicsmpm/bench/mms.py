@@ -1,5 +1,5 @@
 """Benchmark case `mms`: run time against error on V3, the axis-aligned manufactured solution
-(fenicsmpm.verification_mms; BENCHMARKS.md V3, Kamojjala et al. 2013).
+(fenicsmpm.problems.mms; BENCHMARKS.md V3, Kamojjala et al. 2013).
 
     python -m fenicsmpm.bench mms [--quick]
 
@@ -11,7 +11,7 @@ with every shape family ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2"), and implic
 n = 8, 16, 32, 64 (quick: 4, 6, 8, 12).
 
 Metrics per run: displacement_error and stress_error, the normalized L2 errors at the
-particles (verification_mms.errors). wall_s is the time inside the time loop only; the
+particles (problems.mms.errors). wall_s is the time inside the time loop only; the
 one-time JIT/cache loading and form compilation are absorbed by an untimed warm-up run of
 each series, whose duration is reported in "jit_s" (per series); set-up (mesh, particles)
 is reported as setup_s.
@@ -187,7 +187,7 @@ def _integrator(kind, scheme):
 
 
 def run_one(kind, scheme, shape, n_cells, comm):
-    from ..verification_mms import axis_aligned, errors
+    from ..problems.mms import axis_aligned, errors
     integ = _integrator(kind, scheme)
     t0 = time.perf_counter()
     sim, ex = axis_aligned(integ, n_cells=n_cells, per_cell=PER_CELL, shape=shape, cfl=CFL,

@@ -75,7 +75,7 @@ def build_collapse(comm, integrator, h, dt):
     """L3 column; frictional base for explicit integrators, fixed base otherwise."""
     from dolfinx import mesh as dmesh
     import fenicsmpm as fm
-    from fenicsmpm.initial_stress import k0_stress
+    from fenicsmpm.materials.initial_stress import k0_stress
     c = COLLAPSE
     nx, ny = int(round(2 * c["span"] / h)), int(round((c["H"] + 2 * h) / h))
     msh = dmesh.create_rectangle(comm, [[-c["span"], 0.0], [c["span"], ny * h]], [nx, ny],

@@ -3,13 +3,13 @@ answers, standard MPM against GIMP and CPDI.
 
     python -m fenicsmpm.bench self-weight [--quick]
 
-V2, large deformation (fenicsmpm.verification_column; BENCHMARKS.md V2, the AMPLE column):
+V2, large deformation (fenicsmpm.problems.column; BENCHMARKS.md V2, the AMPLE column):
   l0 = 50 m, one cell wide, 2 x 2 particles per cell, Hencky E = 1e4, nu = 0, rho0 = 80,
   g = 10 (top settles 25.94 m). Series:
     QuasiStatic mpm             40 load steps, Newton to rtol 1e-9 (AMPLE's set-up)
     DampedExplicit-MUSL SHAPE   every shape family; explicit MUSL, dt = 0.5 h / c_p, gravity
                                 ramped by the seed-002 sine over one first-mode period T and
-                                mass-proportional damping 2 w1 (verification_column), run to
+                                mass-proportional damping 2 w1 (problems.column), run to
                                 T / 2 + 16 / w1 (the static state)
   cells along the column n_y = 8, 16, 32, 64, 128 (quick: 4, 6, 8, 12).
   Metrics: stress_error (AMPLE's norm: sum_p |sigma_yy - sigma_a(Y_p)| V0_p / (rho0 g l0
@@ -61,7 +61,7 @@ def series_list(quick=False):
 
 def run_one(problem, kind, shape, n_cells, comm):
     import fenicsmpm as fm
-    from ..verification_column import DampedExplicit, errors, large_deformation_column
+    from ..problems.column import DampedExplicit, errors, large_deformation_column
     if kind == "QuasiStatic":
         integ = fm.QuasiStatic(load_steps=LOAD_STEPS, rtol=1e-9)
     else:

@@ -1,4 +1,4 @@
-"""Benchmark case `site-response`: P1 (BENCHMARKS.md section P; fenicsmpm.site_response).
+"""Benchmark case `site-response`: P1 (BENCHMARKS.md section P; fenicsmpm.problems.soil_column).
 
 The 10 m column (E = 1e4 kPa, nu = 0.33, 18.5 kN/m^3: V_s = 44.65 m/s), one cell wide with
 periodic sides, 2x2 particles per cell, on a rigid base shaken by the Gabor wavelet at f0
@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from . import common
-from .. import site_response as sr
+from ..problems import soil_column as sr
 
 CASE = "site-response"
 

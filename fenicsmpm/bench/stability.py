@@ -6,7 +6,7 @@ The short versions of the same scenarios are the tests in tests/stress/, which c
 scenario functions of this module with small sizes. Every scenario is collective (MPI).
 
 Scenarios (full size / --quick):
-  bar-explicit    V1 vibrating bar (fenicsmpm.verification.vibrating_bar: 20 cells, 2x2 ppc,
+  bar-explicit    V1 vibrating bar (fenicsmpm.problems.elastic.vibrating_bar: 20 cells, 2x2 ppc,
                   L = 1, E = 100, rho = 1, v0 = 0.1, period T = 0.4 s), explicit MUSL at
                   dt = "auto" (cfl 0.5), 10^4 steps (125 periods) / 2000 steps.
   bar-newmark     the same bar, implicit Newmark at dt = 5 h / c, 10^3 steps (62.5 periods)
@@ -35,7 +35,7 @@ Scenarios (full size / --quick):
                   pushed to rho g H / E = COLLAPSE_OVERLOAD and COLLAPSE_INVERSION, to find
                   where standard MPM stops (it must stop with a guard's RuntimeError naming
                   the particles, never NaN). 40 / 10 cell rows.
-  impact          colliding discs (verification.colliding_discs, BENCHMARKS L2) at 10x the
+  impact          colliding discs (problems.elastic.colliding_discs, BENCHMARKS L2) at 10x the
                   speed (|v| = 1.41 m/s per disc, closing speed 2.8 m/s, 2.4 c_p), explicit
                   MUSL, USF and USL, to t = 0.6 s (impact at 0.16 s, rebound; later the discs
                   leave the unit square); and the same discs made of neo-Hookean material
@@ -149,7 +149,7 @@ def bar_dt_critical(n_cells=20, comm=None):
     """The explicit critical step h / c_p of the V1 bar on n_cells cells (as Simulation
     computes it from the grid)."""
     import fenicsmpm as fm
-    from ..verification import vibrating_bar
+    from ..problems.elastic import vibrating_bar
     sim, _ = vibrating_bar(fm.Explicit("MUSL"), n_cells=n_cells, cfl=0.5, comm=_comm(comm))
     return sim.dt_critical
 
@@ -162,7 +162,7 @@ def bar_energy(integrator, steps, dt=None, dt_factor=None, n_cells=20, comm=None
     then set sim.dt = force_dt * dt_critical (bypasses the explicit refusal on purpose).
     A guard's exception stops the run and is returned as `error` (the energy series ends
     there). Returns a dict with the series (E relative to E0, t in periods) and metrics."""
-    from ..verification import vibrating_bar
+    from ..problems.elastic import vibrating_bar
     comm = _comm(comm)
     if dt_factor is not None:
         dt = dt_factor * bar_dt_critical(n_cells, comm)
@@ -218,7 +218,7 @@ def dt_sweep(factors=SWEEP_FACTORS, steps=500, n_cells=20, comm=None, force=True
     refusal message, and for accepted factors the energy metrics of `steps` steps; for
     refused ones (force=True) the outcome of the forced run."""
     import fenicsmpm as fm
-    from ..verification import vibrating_bar
+    from ..problems.elastic import vibrating_bar
     comm = _comm(comm)
     dt_crit = bar_dt_critical(n_cells, comm)
     rows = []
@@ -333,7 +333,7 @@ def collapse(n_rows=10, load=COLLAPSE_LOAD, comm=None, ramp_transits=None, hold_
 
 # ---------------------------------------------------------------------------- impact
 def discs(material, integrator, n_cells=20, per_cell=2, speed=0.1, comm=None):
-    """The L2 geometry of verification.colliding_discs (discs of radius 0.2 centred at
+    """The L2 geometry of problems.elastic.colliding_discs (discs of radius 0.2 centred at
     (0.2, 0.2) and (0.8, 0.8), velocities +-(speed, speed), unit square, dt = "auto" at
     cfl 0.5) with another material, built through the public API."""
     import fenicsmpm as fm
@@ -362,7 +362,7 @@ def impact(scheme="MUSL", n_cells=20, speed_factor=IMPACT_SPEED_FACTOR, t_end=IM
     (|sum m v| / sum m |v|_0), min det F, energies and state finiteness (collective).
     A guard's exception stops the run and is returned in `error`."""
     import fenicsmpm as fm
-    from ..verification import colliding_discs
+    from ..problems.elastic import colliding_discs
     comm = _comm(comm)
     speed = 0.1 * speed_factor
     if material is None:

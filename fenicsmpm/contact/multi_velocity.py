@@ -73,7 +73,7 @@ pairs and largest penetration.
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
 boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
 and their force is shared among the bodies at a node by mass, like the external force.
-Axisymmetric grids get the hoop terms of fenicsmpm.axisymmetric per body (multi-velocity
+Axisymmetric grids get the hoop terms of fenicsmpm.kernels.axisymmetric per body (multi-velocity
 only). Particle-layer boundaries are not supported by this integrator."""
 import time
 
@@ -81,9 +81,9 @@ import numpy as np
 from numba import njit
 
 from ..kernels import transfer as kt
-from .explicit import SCHEMES
-from .. import axisymmetric as axi
-from .penalty_contact import PenaltyContact, check_polyline
+from ..integrators.explicit import SCHEMES
+from ..kernels import axisymmetric as axi
+from .penalty import PenaltyContact, check_polyline
 from .rigid import RigidLoad
 
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
