@@ -35,7 +35,6 @@ fm.QuasiStatic needs at most 4."""
 import time
 
 import numpy as np
-from mpi4py import MPI
 from numba import njit
 
 from ..kernels import transfer as kt
