@@ -242,10 +242,7 @@ def run_scene(spec, quick, comm):
         wall = timing["wall_s"]
     except RuntimeError as err:              # raised on every rank (e.g. particles left the mesh)
         failed, steps = str(err), sim.step_count
-        wall = time.perf_counter() - t_start     # until it stopped, warm-up included
-        if comm.size > 1:
-            from mpi4py import MPI
-            wall = comm.allreduce(wall, op=MPI.MAX)
+        wall = common.gmax(comm, time.perf_counter() - t_start)   # until it stopped, warm-up included
     cfg = dict(integrator=spec["integrator"], scheme="MUSL" if integ.explicit else "Newmark",
                shape="Q1 (standard MPM)", h=dx, dt=sim.dt, ppc=4, per_cell=2,
                cell_type="quadrilateral", base=spec["base"], group=spec["group"],
@@ -417,10 +414,8 @@ def plot(doc, path, comm):
     ax6.legend(fontsize=6)
     for ax in (ax1, ax2, ax3, ax4, ax5, ax6):
         ax.grid(alpha=0.3, which="both")
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm,
-                              title=f"fenicsmpm absorbing boundaries, W1 and W3 columns{quick}\n"
-                                    f"{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(
+        doc, "absorbing boundaries, W1 and W3 columns"))
 
 
 def print_report(doc, comm):
@@ -434,8 +429,7 @@ def print_report(doc, comm):
             ("u_base [m]", lambda r: r["metrics"].get("base_displacement")),
             ("tail σ", lambda r: r["metrics"].get("tail_stress")),
             ("failed at [s]", lambda r: r["metrics"].get("failed_at"))]
-    common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
-                       f"{' (quick)' if doc['quick'] else ''}: {doc['machine']['ranks']} rank(s)")
+    common.print_table(doc["runs"], cols, comm, title=common.table_title(doc))
     for n in doc["notes"]:
         common.say(comm, f"  note: {n}")
 
@@ -443,8 +437,7 @@ def print_report(doc, comm):
 def run(quick=False, out="bench-results", comm=None, tiny=False, verbose=True):
     """Run the case, write out/absorbing.json and out/absorbing.png, print the table.
     tiny: four short runs (for the tests). Returns the result dict (on every rank)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     quick = quick or tiny
     runs = []
     for spec in scenes(quick, tiny):

@@ -41,13 +41,12 @@ def _schemes(quick, h):
 
 
 def run_one(name, cls, make, extra, h, t_end, comm):
-    from mpi4py import MPI
     warm, _ = sr.soil_column(make(), h=h, gravity="sudden", t_end=t_end, comm=comm)
     warm.run(steps=2, progress=False)
     sim, info = sr.soil_column(make(), h=h, gravity="sudden", t_end=t_end, comm=comm)
     t0 = time.perf_counter()
     sim.run(t_end=t_end, progress=False)
-    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    wall = common.gmax(comm, time.perf_counter() - t0)
     hist = sr.column_histories(sim, info)
     peaks, err, (f, ratio) = sr.transfer_peaks(hist)
     t = hist["t"]
@@ -91,8 +90,7 @@ def plot(doc, curves, path, comm):
 def run(quick=False, out="bench-results", comm=None, verbose=True, t_end=None):
     """Run the case, write out/site-response.json and out/site-response.png, print the
     table. t_end overrides the record length (a tiny run for tests)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     sizes = (0.5, 0.25) if quick else (0.5, 0.25, 0.125)
     t_end = t_end or (12.0 if quick else 20.0)
     runs, curves = [], []

@@ -223,11 +223,6 @@ def v2_current_stress_error(sim, ex):
     return float(tot[0] / (ex.rho * ex.g * ex.l0 * tot[1]))
 
 
-def _max(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
-
-
 def run_one(problem, cfg, size, comm, sample_every=10):
     """Run one (problem, configuration); returns (record dict)."""
     from ..problems.column import errors
@@ -245,7 +240,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
                 energy_err.append(_total_energy(sim) / e0 - 1.0)
     except Exception as exc:                 # recorded, not raised: a failing technique is data
         failure = f"{type(exc).__name__}: {exc}"
-    wall = _max(comm, wall)
+    wall = common.gmax(comm, wall)
     n = sim.particles.n_global
     if failure is None:
         if problem == "V2":
@@ -294,7 +289,7 @@ def warm_up(problem, cfg, comm):
     for _ in range(WARM_STEPS):
         sim.step()
     sim.energy()
-    return _max(comm, time.perf_counter() - t0)
+    return common.gmax(comm, time.perf_counter() - t0)
 
 
 # ---------------------------------------------------------------------------- analysis
@@ -480,10 +475,8 @@ def plot(doc, path, comm):
     for fam, col in COLORS.items():
         axes[0, 0].plot([], [], "s" if fam == "baseline" else "o", color=col, label=fam)
     axes[0, 0].legend(fontsize=6, loc="center right")
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm,
-                              title=f"fenicsmpm techniques{quick}: error against run time\n"
-                                    f"{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(
+        doc, "techniques", ": error against run time"))
 
 
 def print_report(doc, comm):
@@ -492,8 +485,7 @@ def print_report(doc, comm):
             ("error x time", lambda r: r["metrics"].get("error_x_time")),
             ("splits", lambda r: r["metrics"].get("splits")),
             ("failed", lambda r: r["config"].get("failure", "")[:40] or None)]
-    common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
-                       f"{' (quick)' if doc['quick'] else ''}: {doc['machine']['ranks']} rank(s)")
+    common.print_table(doc["runs"], cols, comm, title=common.table_title(doc))
     common.say(comm, "\n" + readme_block(doc))
 
 
@@ -503,8 +495,7 @@ def run(quick=False, out="bench-results", comm=None, problems=PROBLEMS, sizes=No
     returns the result dict. sizes: {problem: size} overrides; configs: names to run;
     repeats: runs per configuration, the fastest kept (default 1 quick, 2 full; the errors
     are deterministic, only the wall time varies on a shared machine)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     mode = "quick" if quick else "full"
     reps = (1 if quick else 2) if repeats is None else int(repeats)
     size = dict(SIZES[mode], **(sizes or {}))
@@ -540,7 +531,7 @@ def run(quick=False, out="bench-results", comm=None, problems=PROBLEMS, sizes=No
                         error_measures={p: ERROR_NAMES[p] for p in problems},
                         families=fam, baseline=BASELINE, not_applicable=na, jit_s=jit,
                         repeats=reps,
-                        total_wall_s=_max(comm, time.perf_counter() - t_start))
+                        total_wall_s=common.gmax(comm, time.perf_counter() - t_start))
     doc["recommendation"] = common._clean(recommend(doc))
     common.write_result(doc, out, comm)
     plot(doc, os.path.join(out, f"{CASE}.png"), comm)
