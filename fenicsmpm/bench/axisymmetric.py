@@ -52,7 +52,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
                 say(f"{kind} {shape} nx = {nx}: error {m['error']:.3e}, wall {wall:.3f} s")
     doc = common.result(CASE, runs, comm, quick=quick,
                         notes=["Stresses: cell means at the cell centres (fenicsmpm."
-                               "verification_cylinder); error relative to p (sigma_rr, Hill) "
+                               "problems.cylinder); error relative to p (sigma_rr, Hill) "
                                "or to the local exact value (sigma_tt)."])
     common.write_result(doc, out, comm)
     common.print_table([dict(name=r["name"], h=r["config"]["h"], err=r["metrics"]["error"],

@@ -2,7 +2,7 @@
 
 The 10 m column (E = 1e4 kPa, nu = 0.33, 18.5 kN/m^3: V_s = 44.65 m/s), one cell wide with
 periodic sides, 2x2 particles per cell, on a rigid base shaken by the Gabor wavelet at f0
-(site_response.gabor), gravity switched on at t = 0 on the stress-free column (the source of
+(soil_column.gabor), gravity switched on at t = 0 on the stress-free column (the source of
 vertical noise). Schemes: symplectic Euler (fm.Explicit(), MUSL), explicit generalized-alpha
 rho_b = 0.5 and 0.8 (dt = "auto", cfl 0.5), implicit Newmark (beta = 1/4, gamma = 1/2) and
 implicit generalized-alpha rho_inf = 0.8 at dt = h / c_p (Courant 1). Cell sizes 0.5 and
