@@ -10,7 +10,7 @@ shape but not its size in the text; here it is W = 4 m wide and H = 8 m tall, on
 h = 0.4 m (10 x 20 cells of material, 1800 particles: the seed's count). --quick: h = 0.8 m
 (450 particles), dt = 2 ms.
 
-Initial state: K0 = nu / (1 - nu) = 0.724 (fenicsmpm.initial_stress.k0_stress below the top of
+Initial state: K0 = nu / (1 - nu) = 0.724 (fenicsmpm.materials.initial_stress.k0_stress below the top of
 the column): sigma_yy = -rho g d, sigma_xx = sigma_zz = K0 sigma_yy, no shear. Gravity acts in
 full from t = 0 and the sides are free, so the column collapses plastically.
 Base: a rigid frictional boundary (sim.add_friction, Coulomb mu = 0.6, stick/slip) on the
@@ -50,7 +50,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.initial_stress import k0_stress
+from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
 E, NU, RHO = 20.0e6, 0.42, 1000.0

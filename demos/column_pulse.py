@@ -36,7 +36,7 @@ import numpy as np
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.absorbing_column import absorbing_column, histories, summary
+from fenicsmpm.problems.absorbing_column import absorbing_column, histories, summary
 
 comm = MPI.COMM_WORLD
 BASES = ("fixed", "viscous", "viscoelastic")

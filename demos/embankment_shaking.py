@@ -24,7 +24,7 @@ Geometry (plane strain, structured quadrilaterals of size h; default h = 0.5 m, 
   and 0.78 with the residual strength, so the slope stands under gravity but, once the
   shaking has softened it, goes on moving for a while after the shaking ends.
   2 x 2 particles per cell (same density in both soils, so the K0 overburden is exact).
-Initial state: fenicsmpm.initial_stress.k0_stress below the embankment/ground surface
+Initial state: fenicsmpm.materials.initial_stress.k0_stress below the embankment/ground surface
   (K0 = nu / (1 - nu) = 0.43), gravity g = 9.81 m/s^2 in full from t = 0.
 Stages (one explicit run, fm.Explicit("MUSL"), dt = "auto", cfl 0.5; --scheme ga:
   fm.ExplicitGeneralizedAlpha(rho_b = 0.8), which matches MUSL at --quick (crest settlement
@@ -59,7 +59,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.initial_stress import k0_stress
+from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
 G = 9.81

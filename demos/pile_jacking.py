@@ -47,7 +47,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.initial_stress import k0_stress
+from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
 R_SOIL, H_SOIL = 5.0, 10.0

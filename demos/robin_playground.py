@@ -6,7 +6,7 @@
 fm.Robin(traction, where) takes any traction(u, v, n) -> UFL vector of the boundary
 displacement u, velocity v and outward normal n; fenicsmpm assembles it on the facets
 where(x) selects (and, for implicit runs, derives its tangent with ufl.derivative). The
-W1 column (fenicsmpm.absorbing_column: H = 100 m, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3,
+W1 column (fenicsmpm.problems.absorbing_column: H = 100 m, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3,
 side rollers, Gaussian surface pulse of 10.07 kPa) stands on each of these bases:
 
   viscous         Lysmer-Kuhlemeyer:  t = -rho c_p v_n n - rho c_s v_s
@@ -38,8 +38,8 @@ import ufl
 from mpi4py import MPI
 
 import fenicsmpm as fm
-import fenicsmpm.absorbing_column as W1
-from fenicsmpm.absorbing_column import absorbing_column, histories, reflection_ratio
+import fenicsmpm.problems.absorbing_column as W1
+from fenicsmpm.problems.absorbing_column import absorbing_column, histories, reflection_ratio
 
 comm = MPI.COMM_WORLD
 

@@ -20,7 +20,7 @@ import numpy as np
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import self_weight_column
+from fenicsmpm.problems.elastic import self_weight_column
 
 comm = MPI.COMM_WORLD
 H = 10.0          # column height (the builder's default)

@@ -3,10 +3,10 @@
     python3 demos/site_response.py [--out DIR] [--quick]
     mpirun -n 2 python3 demos/site_response.py
 
-Column (fenicsmpm.site_response.soil_column): H = 10 m, E = 1e4 kPa, nu = 0.33, unit weight
+Column (fenicsmpm.problems.soil_column.soil_column): H = 10 m, E = 1e4 kPa, nu = 0.33, unit weight
 18.5 kN/m^3 (V_s = 44.65 m/s, f_n = (2n+1) V_s / (4H) = 1.116, 3.349, 5.581 Hz), one cell
 wide with periodic sides, 2x2 particles per cell, element size 0.25 m (--quick: 0.5 m).
-Input: the Gabor wavelet at f0 (site_response.gabor: 0.1 m/s^2, gamma = 0.5, centred at
+Input: the Gabor wavelet at f0 (soil_column.gabor: 0.1 m/s^2, gamma = 0.5, centred at
 t = 1 s), baseline-corrected, on a rigid base (relative-frame body force; the absolute top
 motion is relative + input). Gravity is switched on at t = 0 on the stress-free column, so
 the vertical acceleration shows how each scheme treats the vertical (P-wave) noise.
@@ -29,7 +29,7 @@ import numpy as np
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm import site_response as sr
+from fenicsmpm.problems import soil_column as sr
 
 
 def main(argv=None):

@@ -21,7 +21,7 @@ import numpy as np
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.elastic import vibrating_bar
 
 comm = MPI.COMM_WORLD
 

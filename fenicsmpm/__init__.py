@@ -5,6 +5,22 @@
     soil = fm.LinearElastic(E=20e6, nu=0.25, density=1500.0)
     pts = fm.Particles.fill(grid, soil, per_cell=2)
     sim = fm.Simulation(grid, pts, integrator=fm.Explicit("MUSL"), dt="auto", gravity=(0, -9.81))
+
+Who owns which stage of a step (DESIGN.md; the integrator puts them in order):
+
+    stage          module
+    locate         grid (Grid.locate), particles, migration (ranks), guards.particles_left
+    shape          shapes/ (standard, gimp, cpdi, gauss_gimp, cmpm)
+    P2G            kernels/transfer (+ kernels/axisymmetric hoop terms), boundaries/ (loads)
+    grid solve     integrators/ (explicit, implicit, generalized_alpha, dmgc), contact/
+    G2P            kernels/transfer, kernels/smoothing
+    constitutive   materials/ (Simulation.trial_stress / commit)
+    relocate       particles, migration, splitting; guards (checks after the step)
+    time loop      simulation (Simulation.step/run); set-up API in setup, energy monitor in
+                   energy, checkpoint/restart in checkpoint; Probe, Output and writers in io/
+
+Known-answer problems (tests, demos, benchmarks) are in problems/, the benchmark suite in
+bench/ (python -m fenicsmpm.bench), MPI mesh partitioners in partition.
 """
 from .grid import Grid
 from .particles import Particles
@@ -12,11 +28,12 @@ from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
 from .materials import Hypoplastic
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
-from .integrators import ExplicitContact, RigidLoad, set_body
+from .contact import ExplicitContact, RigidLoad, set_body
 from .integrators import DoubleMappingNewmark, DoubleMappingQuasiStatic
 from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .boundaries import CompliantBase, InputMotion, compliant_base, rigid_base
-from .simulation import Simulation, Probe, Output
+from .simulation import Simulation
+from .io import Probe, Output
 from . import partition
 
 __version__ = "0.1.0"

@@ -178,3 +178,27 @@ def read(sim, path):
         restore(sim)
     sim._n_alloc = -1                          # per-particle work arrays are re-sized
     return sim
+
+
+class CheckpointMixin:
+    """checkpoint, restore and restart of fenicsmpm.Simulation (inherited)."""
+
+    def checkpoint(self, path, keep=1):
+        """Save the complete state under directory `path` (collective; see fenicsmpm.checkpoint):
+        particles with history variables, integrator and boundary state, stage, time, step and
+        probe records. Written atomically; the `keep` newest checkpoints are kept."""
+        return write(self, str(path), keep)
+
+    def restore(self, path):
+        """Load the newest checkpoint under `path` into this simulation, which must be set up
+        as the checkpointed one (mesh, materials, integrator, stage, boundaries, probes)."""
+        return read(self, str(path))
+
+    @classmethod
+    def restart(cls, path, build):
+        """`build()` sets a simulation up as for the original run; it is restored from the
+        newest checkpoint under `path` and returned, ready to `run` on."""
+        sim = build()
+        if not isinstance(sim, cls):
+            raise TypeError(f"restart: 'build' must return a Simulation, got {type(sim).__name__}")
+        return sim.restore(path)

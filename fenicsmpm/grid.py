@@ -10,7 +10,7 @@ import dolfinx
 from dolfinx import fem, geometry
 from dolfinx.mesh import CellType
 
-from .kernels import shape as ks
+from .shapes import standard as ks
 
 _SUPPORTED = {
     CellType.triangle: ks.SIMPLEX,
@@ -32,7 +32,7 @@ class Grid:
     axisymmetric=True (2D only) reads the mesh as a meridian plane (r, z) = (x[0], x[1]),
     r >= 0, of a body of revolution (Sulsky & Schreyer 1996): particle volumes and masses are
     per radian (V = r A), the hoop strain is u_r / r, and boundary forms are weighted by r
-    (fenicsmpm.axisymmetric).
+    (fenicsmpm.kernels.axisymmetric).
     """
 
     def __init__(self, mesh, axisymmetric=False):

@@ -1,7 +1,10 @@
-"""Always-on checks after each step (cheap: one read-only pass over the particles).
+"""Always-on checks after each step (cheap: one read-only pass over the particles), and the
+`on_leave` policy for particles that left the mesh (particles_left).
 
 A run either stays physical or stops with a message naming the step, the time, the field
 and the first offending particles (ids and positions), on every rank at once."""
+import warnings
+
 import numpy as np
 from numba import njit
 
@@ -70,3 +73,37 @@ def check_particles(sim, vol_tol=1e-6):
     msg = (f"step {sim.step_count}, t = {sim.t:.6g}: {what} in {n_bad} particle(s); first ids "
            f"{[r[0] for r in first]} at {[r[1] for r in first]}")
     raise (FloatingPointError if code <= 4 else RuntimeError)(msg)
+
+
+def particles_left(sim, ids, xs):
+    """Apply sim.on_leave (Simulation) to the particles in no cell of the mesh (cell == -1; `ids`
+    and `xs` list them globally, the same on every rank)."""
+    if sim.on_leave == "periodic":             # re-enter through the opposite face
+        from .boundaries.periodic import wrap
+        if sim.grid.periodic is None:
+            raise ValueError("Simulation: on_leave='periodic' needs periodic sides "
+                             "(sim.set_periodic(axis))")
+        wrap(sim, sim.grid.periodic)
+        ids, xs = sim.particles.send_to_owners()
+        if len(ids) == 0:
+            return
+    where = (f"step {sim.step_count}, t = {sim.t:.6g}: {len(ids)} particle(s) left the mesh, "
+             f"ids {ids[:5].tolist()} at {np.round(xs[:5], 6).tolist()}")
+    if sim.on_leave == "periodic":
+        raise ParticlesLeftMesh(where)
+    if sim.on_leave == "error":
+        raise ParticlesLeftMesh(where)
+    p = sim.particles
+    gone = p.cell < 0
+    mass = p.mass[gone].sum()
+    if sim.comm.size > 1:
+        mass = sim.comm.allreduce(mass)
+    keep = np.flatnonzero(~gone)
+    for name in p.field_names():
+        setattr(p, name, np.ascontiguousarray(getattr(p, name)[keep]))
+    p.version += 1
+    sim.removed_mass += mass
+    sim.removed_count += len(ids)
+    if sim.comm.rank == 0:
+        warnings.warn(f"{where}: removed (mass {mass:.6g}; {sim.removed_count} particles, "
+                      f"mass {sim.removed_mass:.6g} removed so far)", stacklevel=3)

@@ -7,8 +7,8 @@ integrates the cell volume exactly.
 """
 import numpy as np
 
-from .axisymmetric import check_radius
-from .kernels import shape as ks
+from .kernels.axisymmetric import check_radius
+from .shapes import standard as ks
 
 # name -> (trailing shape as a function of gdim, dtype)
 FIELDS = {
@@ -144,7 +144,7 @@ class Particles:
     @classmethod
     def _create(cls, grid, material, x, vol, cells, xi, velocity):
         """vol is the cell-measure share of each point; on an axisymmetric grid it is a
-        meridian area and the volume per radian is r vol (fenicsmpm.axisymmetric)."""
+        meridian area and the volume per radian is r vol (fenicsmpm.kernels.axisymmetric)."""
         n = len(x)
         if grid.axisymmetric:
             check_radius(x, "Particles")

@@ -1,5 +1,5 @@
 """W1 (BENCHMARKS.md section W): absorbing (Robin) boundaries on the 1D column under a
-Gaussian surface pulse, fenicsmpm.absorbing_column. Serial and `mpirun -n 2`.
+Gaussian surface pulse, fenicsmpm.problems.absorbing_column. Serial and `mpirun -n 2`.
 
 Column: H = 100 m, one cell wide, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3, side rollers,
 p(t) = 0.375 / (a sqrt(pi)) exp(-((t - t0) / a)^2) kPa, t0 = 0.05 s, a = 0.021 s, so
@@ -19,8 +19,8 @@ import ufl
 from mpi4py import MPI
 
 import fenicsmpm as fm
-import fenicsmpm.absorbing_column as W1
-from fenicsmpm.absorbing_column import (absorbing_column, arrival_time, histories,
+import fenicsmpm.problems.absorbing_column as W1
+from fenicsmpm.problems.absorbing_column import (absorbing_column, arrival_time, histories,
                                         incident_peak_velocity, reflection_ratio, summary)
 
 comm = MPI.COMM_WORLD

@@ -1,6 +1,6 @@
-"""Axisymmetric MPM (fenicsmpm.axisymmetric): a 2D (r, z) grid of a body of revolution.
+"""Axisymmetric MPM (fenicsmpm.kernels.axisymmetric): a 2D (r, z) grid of a body of revolution.
 
-- Lame thick cylinder (fenicsmpm.verification_cylinder: a = 1, b = 2, internal pressure p,
+- Lame thick cylinder (fenicsmpm.problems.cylinder: a = 1, b = 2, internal pressure p,
   plane strain in z, linear elastic, quasi-static, 16 x 4 cells, 2 x 2 particles per cell):
   the cell-mean stresses within 2 % of the exact sigma_rr (relative to p) and sigma_tt
   (relative); particle u_r within 0.1 %; Newton in <= 2 iterations (the hoop terms of the
@@ -18,7 +18,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm import verification_cylinder as vc
+from fenicsmpm.problems import cylinder as vc
 
 
 @pytest.mark.parametrize("shape", ["mpm", "cpgimp"])

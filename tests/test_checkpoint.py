@@ -8,8 +8,8 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.absorbing_column import absorbing_column
-from fenicsmpm.verification import colliding_discs, vibrating_bar
+from fenicsmpm.problems.absorbing_column import absorbing_column
+from fenicsmpm.problems.elastic import colliding_discs, vibrating_bar
 from fenicsmpm.partition import strips
 
 WORLD = MPI.COMM_WORLD

@@ -1,4 +1,4 @@
-"""CPDI1 and CPDI2 shape functions (fenicsmpm.kernels.cpdi, Simulation(shape=...)).
+"""CPDI1 and CPDI2 shape functions (fenicsmpm.shapes.cpdi, Simulation(shape=...)).
 
 - On triangles and quadrilaterals, structured and with interior vertices moved by up to
   0.1 h, at random particle positions (domains sheared and stretched by a random F near I for
@@ -21,8 +21,8 @@ from mpi4py import MPI
 import fenicsmpm as fm
 from conftest import distort_interior
 from fenicsmpm.grid import vertex_ghost_partitioner
-from fenicsmpm.kernels import cpdi as kc
-from fenicsmpm.kernels import shape as ks
+from fenicsmpm.shapes import cpdi as kc
+from fenicsmpm.shapes import standard as ks
 from test_gimp import RHO, G, H, column_errors, soft_column
 
 CT = dmesh.CellType

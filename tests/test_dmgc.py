@@ -1,4 +1,4 @@
-"""DM-GC: double mapping + composite MPM (fenicsmpm.kernels.cmpm, fenicsmpm.integrators.dmgc;
+"""DM-GC: double mapping + composite MPM (fenicsmpm.shapes.cmpm, fenicsmpm.integrators.dmgc;
 seed 000 §2.7-2.9, BENCHMARKS.md "DM-GC and CMPM").
 
 - The 1D CMPM functions (eq 2.54) equal the corrected closed forms of eqs 2.55 (interior) and
@@ -32,9 +32,9 @@ from petsc4py import PETSc
 
 import fenicsmpm as fm
 from fenicsmpm.grid import vertex_ghost_partitioner
-from fenicsmpm.integrators.dmgc import self_weight_errors
-from fenicsmpm.kernels.cmpm import CompositeBasis, lagrange_1d
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.elastic import self_weight_errors
+from fenicsmpm.shapes.cmpm import CompositeBasis, lagrange_1d
+from fenicsmpm.problems.elastic import vibrating_bar
 
 WORLD = MPI.COMM_WORLD
 XI = np.linspace(-1.0, 1.0, 41)

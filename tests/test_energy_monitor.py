@@ -7,8 +7,8 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.absorbing_column import absorbing_column
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.absorbing_column import absorbing_column
+from fenicsmpm.problems.elastic import vibrating_bar
 
 
 def test_bar_energy_balance_and_csv(shared_tmp_path):

@@ -1,4 +1,4 @@
-"""Deformed-voxel GIMP by 2 x 2 Gauss quadrature (fenicsmpm.kernels.gauss_gimp,
+"""Deformed-voxel GIMP by 2 x 2 Gauss quadrature (fenicsmpm.shapes.gauss_gimp,
 Simulation(shape="gauss"), seed 002 §3.3.1 with the (3.17) erratum of BENCHMARKS.md).
 
 - On triangles and quadrilaterals, structured and with interior vertices moved by up to
@@ -35,7 +35,7 @@ import fenicsmpm as fm
 from conftest import distort_interior
 from fenicsmpm.grid import vertex_ghost_partitioner
 from fenicsmpm.integrators.linear_system import stencil_rings
-from fenicsmpm.kernels import gauss_gimp as kgg
+from fenicsmpm.shapes import gauss_gimp as kgg
 from test_gimp import RHO, G, H, column_errors, soft_column
 
 CT = dmesh.CellType
@@ -140,7 +140,7 @@ def test_implicit_large_deformation_column():
     test_implicit_wide: runs on the CPDI pattern (rings 2) with Newton converging in <= 6
     iterations; stress error measured 3.5 % of rho0 g l0 (cpGIMP 0.37 %, CPDI2 0.26 %,
     standard MPM 8.7 %), asserted below 5 %."""
-    from fenicsmpm.verification_column import errors, large_deformation_column
+    from fenicsmpm.problems.column import errors, large_deformation_column
     sim, ex = large_deformation_column(fm.QuasiStatic(load_steps=40), n_cells=16, shape="gauss")
     sim.run(steps=ex.steps, progress=False)
     assert sim.integrator.system.rings == 2

@@ -10,7 +10,7 @@ integrator calls on its nodal arrays (Omega = omega dt):
   - stable (spectral radius <= 1 + 1e-9) up to Omega_s of BENCHMARKS P and unstable 0.1 %
     above it, the check BENCHMARKS asks for before relying on Omega_s;
   - rho_b = 1 is central difference to round-off (|du| < 1e-12 over 1000 steps).
-MPM, V1 vibrating bar (verification.vibrating_bar, 20 cells, 2 particles per cell):
+MPM, V1 vibrating bar (problems.elastic.vibrating_bar, 20 cells, 2 particles per cell):
   - explicit generalized-alpha (rho_b = 0.8, cfl 0.1, 5 periods): period within 1 %,
     energy within 1 %;
   - rho_b = 1 equals fm.Explicit("USL", flip) to round-off (x, u, stress; v_p - dt a_p / 2
@@ -47,7 +47,7 @@ from mpi4py import MPI
 import fenicsmpm as fm
 from fenicsmpm.integrators.generalized_alpha import (explicit_parameters, explicit_update,
                                                      implicit_parameters)
-from fenicsmpm.verification import colliding_discs, vibrating_bar
+from fenicsmpm.problems.elastic import colliding_discs, vibrating_bar
 
 RHO_B = (0.3, 0.5, 0.8, 0.9)
 V0 = 0.1
@@ -375,7 +375,7 @@ def test_discs_rho_b_08_through_impact():
 
 @pytest.fixture(scope="module")
 def column_usl_reflection():
-    from fenicsmpm.absorbing_column import absorbing_column, summary
+    from fenicsmpm.problems.absorbing_column import absorbing_column, summary
     sim, ex = absorbing_column(fm.Explicit("USL"), base="viscous", dx=0.5)
     sim.run(t_end=1.5)
     return summary(sim, ex)["reflection"]
@@ -385,7 +385,7 @@ def column_usl_reflection():
 def test_absorbing_column_viscous_base(rho_b, column_usl_reflection):
     """W1 column with a Lysmer dashpot base: the dashpot takes the transported velocity (at
     v^n it is unconditionally unstable at rho_b = 1 and needs c dt <= 0.5 at rho_b = 0.8)."""
-    from fenicsmpm.absorbing_column import absorbing_column, summary
+    from fenicsmpm.problems.absorbing_column import absorbing_column, summary
     sim, ex = absorbing_column(fm.ExplicitGeneralizedAlpha(rho_b), base="viscous", dx=0.5)
     sim.run(t_end=1.5)
     r = summary(sim, ex)["reflection"]

@@ -1,4 +1,4 @@
-"""uGIMP and cpGIMP shape functions (fenicsmpm.kernels.gimp, Simulation(shape=...)).
+"""uGIMP and cpGIMP shape functions (fenicsmpm.shapes.gimp, Simulation(shape=...)).
 
 - The 1D weight and gradient equal the corrected closed form of BENCHMARKS.md ("GIMP weight",
   seeds 000 eq 2.48 / 002 eq 3.14) at points in each of its five pieces, on their borders and
@@ -24,7 +24,7 @@ from mpi4py import MPI
 
 import fenicsmpm as fm
 from fenicsmpm.grid import vertex_ghost_partitioner
-from fenicsmpm.kernels import gimp as kg
+from fenicsmpm.shapes import gimp as kg
 
 CT = dmesh.CellType
 H, RHO, E_SOFT, G, T_RAMP = 10.0, 6000.0, 5e6, 10.0, 20.0

@@ -4,7 +4,7 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import colliding_discs
+from fenicsmpm.problems.elastic import colliding_discs
 
 
 def test_nan_stress_stops_the_run_naming_step_field_and_particle():

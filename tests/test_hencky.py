@@ -82,7 +82,7 @@ def test_objectivity():
 
 
 def test_v2_column_quasistatic():
-    from fenicsmpm.verification_column import errors, large_deformation_column
+    from fenicsmpm.problems.column import errors, large_deformation_column
     integ = fm.QuasiStatic(load_steps=40, rtol=1e-9)
     sim, ex = large_deformation_column(integ, n_cells=4)
     sim.run(steps=ex.steps, progress=False)

@@ -24,8 +24,8 @@ from mpi4py import MPI
 import fenicsmpm as fm
 from fenicsmpm.grid import vertex_ghost_partitioner
 from fenicsmpm.integrators.linear_system import LinearSystem
-from fenicsmpm.verification import vibrating_bar
-from fenicsmpm.verification_column import DampedExplicit, errors, large_deformation_column
+from fenicsmpm.problems.elastic import vibrating_bar
+from fenicsmpm.problems.column import DampedExplicit, errors, large_deformation_column
 
 WORLD = MPI.COMM_WORLD
 

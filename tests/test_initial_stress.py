@@ -12,7 +12,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.initial_stress import k0_stress
+from fenicsmpm.materials.initial_stress import k0_stress
 
 RHO, G = 1800.0, 9.81
 

@@ -1,4 +1,4 @@
-"""Mixed MPM-Gauss-point integration (fenicsmpm.mixed_integration; seed 003 after Jassim 2013).
+"""Mixed MPM-Gauss-point integration (fenicsmpm.integrators.mixed_integration; seed 003 after Jassim 2013).
 
 - A patch of full cells with a uniform stress: the mixed force equals the particle-quadrature
   force (1e-12; 2D quadrilaterals and triangles, 3D hexahedra), interior nodal forces vanish.
@@ -19,8 +19,8 @@ from mpi4py import MPI
 
 import fenicsmpm as fm
 from fenicsmpm.bench import techniques
-from fenicsmpm.verification import self_weight_column
-from fenicsmpm.verification_column import errors
+from fenicsmpm.problems.elastic import self_weight_column
+from fenicsmpm.problems.column import errors
 
 comm = MPI.COMM_WORLD
 SIGMA = np.array([[3.0, 1.5, 0.7], [1.5, -2.0, 0.4], [0.7, 0.4, 1.2]])

@@ -1,4 +1,4 @@
-"""V3, the axis-aligned manufactured solution (fenicsmpm.verification_mms; BENCHMARKS.md V3).
+"""V3, the axis-aligned manufactured solution (fenicsmpm.problems.mms; BENCHMARKS.md V3).
 
 Unit square, neo-Hookean E = 1e7, nu = 0.3, rho0 = 1000, A = 0.05, 2 x 2 particles per cell,
 explicit MUSL at dt = 0.2 h / c_p, run to the displacement peak t_end = 1 / (2 c).
@@ -17,7 +17,7 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification_mms import AxisAligned, axis_aligned, errors
+from fenicsmpm.problems.mms import AxisAligned, axis_aligned, errors
 
 comm = MPI.COMM_WORLD
 

@@ -8,7 +8,7 @@ from mpi4py import MPI
 from dolfinx import mesh
 
 import fenicsmpm as fm
-from fenicsmpm.verification import colliding_discs, vibrating_bar
+from fenicsmpm.problems.elastic import colliding_discs, vibrating_bar
 from fenicsmpm.partition import check_strips, strips
 
 WORLD = MPI.COMM_WORLD

@@ -1,5 +1,5 @@
 """Penalty node-to-segment contact (issue 9; seed 004 eqs 2.40-2.53):
-fm.ExplicitContact(algorithm="penalty"), integrators.penalty_contact. Serial and under
+fm.ExplicitContact(algorithm="penalty"), contact.penalty. Serial and under
 mpirun -n 2.
 
 - BENCHMARKS C1 at h = 0.4 m (fenicsmpm.bench.contact.incline, k_n = (K + 4G/3)/h of the
@@ -19,7 +19,7 @@ from mpi4py import MPI
 
 import fenicsmpm as fm
 from fenicsmpm.bench.contact import incline
-from fenicsmpm.integrators.penalty_contact import circle, line, rectangle
+from fenicsmpm.contact.penalty import circle, line, rectangle
 
 comm = MPI.COMM_WORLD
 

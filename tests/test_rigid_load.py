@@ -1,4 +1,4 @@
-"""Force-driven rigid bodies (fm.RigidLoad in fm.ExplicitContact; integrators.rigid).
+"""Force-driven rigid bodies (fm.RigidLoad in fm.ExplicitContact; contact.rigid).
 
 A rigid block (M = 160 kg per unit thickness) driven by F = 160 N (no gravity) starts
 0.2 m from a free elastic block of the same mass (frictionless contact):

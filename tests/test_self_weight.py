@@ -17,7 +17,7 @@ from dolfinx import mesh as dmesh
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import self_weight_column
+from fenicsmpm.problems.elastic import self_weight_column
 
 H, RHO, G = 10.0, 2000.0, 10.0
 LOAD_STEPS = 5

@@ -4,7 +4,7 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import colliding_discs, self_weight_column
+from fenicsmpm.problems.elastic import colliding_discs, self_weight_column
 
 
 class CountingComm:

@@ -1,4 +1,4 @@
-"""Standard-MPM shape functions and point location (fenicsmpm.kernels.shape, Grid.locate).
+"""Standard-MPM shape functions and point location (fenicsmpm.shapes.standard, Grid.locate).
 
 On triangles, quadrilaterals, tetrahedra and hexahedra, structured (dolfinx create_rectangle /
 create_box) and distorted (moved or randomly jittered vertices, so the O(1) structured
@@ -20,7 +20,7 @@ from mpi4py import MPI
 
 import fenicsmpm as fm
 from conftest import distort_interior
-from fenicsmpm.kernels import shape as ks
+from fenicsmpm.shapes import standard as ks
 
 CT = dmesh.CellType
 CELL_TYPES = [CT.triangle, CT.quadrilateral, CT.tetrahedron, CT.hexahedron]
@@ -64,7 +64,7 @@ def random_points(grid, rng, n=N_POINTS, margin=0.02):
 
 
 def call_kernel(kernel, grid, **arrays):
-    """Call a numba kernel of fenicsmpm.kernels.shape with its arguments taken by name:
+    """Call a numba kernel of fenicsmpm.shapes.standard with its arguments taken by name:
     from `arrays` first, else the Grid attribute of that name (so the tests follow the
     kernels' signatures, e.g. D, kind, cell_nodes, node_x, simplex_grad, affine_Jinv)."""
     names = inspect.signature(kernel.py_func).parameters

@@ -1,10 +1,10 @@
-"""Site response (BENCHMARKS.md P1; fenicsmpm.site_response, boundaries.base_motion).
+"""Site response (BENCHMARKS.md P1; fenicsmpm.problems.soil_column, boundaries.base_motion).
 Serial and `mpirun -n 2`.
 
 P1 column: H = 10 m, E = 1e4 kPa, nu = 0.33, unit weight 18.5 kN/m^3 (V_s = 44.65 m/s,
 f_n = (2n+1) V_s / (4H) = 1.116, 3.349, 5.581 Hz), one cell wide with periodic sides, cell
 size 0.25 m (P1), 2x2 particles per cell, shaken by the Gabor wavelet of
-site_response.gabor (A = 0.1 m/s^2 at f0, gamma = 0.5, baseline-corrected), 20 s records
+soil_column.gabor (A = 0.1 m/s^2 at f0, gamma = 0.5, baseline-corrected), 20 s records
 (frequency resolution of the zero-padded spectra 0.006 Hz).
 Symplectic Euler is fm.Explicit() (MUSL, FLIP), explicit generalized-alpha
 fm.ExplicitGeneralizedAlpha(0.5); both at dt = "auto" (cfl 0.5)."""
@@ -15,7 +15,7 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm import site_response as sr
+from fenicsmpm.problems import soil_column as sr
 
 comm = MPI.COMM_WORLD
 T_END, DX = 20.0, 0.25

@@ -8,7 +8,7 @@ from dolfinx import mesh
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.elastic import vibrating_bar
 
 WORLD = MPI.COMM_WORLD
 

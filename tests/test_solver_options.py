@@ -4,7 +4,7 @@ import pytest
 
 import fenicsmpm as fm
 from fenicsmpm.integrators.linear_system import _insert_command_line_options
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.elastic import vibrating_bar
 from petsc4py import PETSc
 
 

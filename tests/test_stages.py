@@ -5,7 +5,7 @@ import pytest
 from mpi4py import MPI
 
 import fenicsmpm as fm
-from fenicsmpm.verification import self_weight_column
+from fenicsmpm.problems.elastic import self_weight_column
 
 BASE = staticmethod(lambda x: np.isclose(x[:, 1], 0.0))
 
@@ -78,7 +78,7 @@ def test_gravity_ramp_follows_seed_002_eq_4_13():
     """L1 ramp: g(t) = g [sin(2 pi t / T - pi/2) + 1] / 2 up to T/2, then g: the nodal gravity
     force at a few times equals m_i times that (relative 1e-14)."""
     import math
-    from fenicsmpm.verification import vibrating_bar
+    from fenicsmpm.problems.elastic import vibrating_bar
     sim, _ = vibrating_bar(fm.Explicit(), n_cells=4)
     sim = fm.Simulation(sim.grid, sim.particles, fm.Explicit(), dt=sim.dt, gravity=(0.0, -10.0),
                         gravity_ramp=20.0)

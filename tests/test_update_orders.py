@@ -5,7 +5,7 @@ while USL loses energy (measured 1.7 % at the end, 6.7 % at worst)."""
 import numpy as np
 
 import fenicsmpm as fm
-from fenicsmpm.verification import colliding_discs
+from fenicsmpm.problems.elastic import colliding_discs
 
 
 def _energy_error(scheme):

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import fenicsmpm as fm
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.elastic import vibrating_bar
 
 V0 = 0.1
 N_PERIODS = 5

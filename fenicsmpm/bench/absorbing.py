@@ -5,7 +5,7 @@ and wall time against cell size and Courant number. W3: the 20 m column under th
 scaled to 300 kPa (large deformation): fixed base, mesh-boundary dashpots and a
 particle-layer dashpot whose mesh extends below the material.
 
-W1 scene (fenicsmpm.absorbing_column): H = 100 m, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3,
+W1 scene (fenicsmpm.problems.absorbing_column): H = 100 m, E = 20 MPa, nu = 0.25, rho = 1500 kg/m^3,
 side rollers, p(t) = 0.375 / (a sqrt(pi)) exp(-((t - t0) / a)^2) kPa (t0 = 0.05 s,
 a = 0.021 s), 2x2 particles per cell. Bases:
   fixed         Dirichlet (all components of the base nodes),
@@ -157,7 +157,7 @@ def scenes(quick=False, tiny=False):
 
 def w3_load(t):
     """The W3 surface pressure [Pa]: the W1 pulse scaled to a 300 kPa peak."""
-    from ..absorbing_column import A, T0
+    from ..problems.absorbing_column import A, T0
     return W3_PEAK * math.exp(-((t - T0) / A) ** 2)
 
 
@@ -168,7 +168,7 @@ def w3_column(integrator, method, dx, width, dt, comm):
     W3_BELOW below it; the load acts on the top particle row (sim.add_particle_load)."""
     import fenicsmpm as fm
     from dolfinx import mesh as dmesh
-    from ..absorbing_column import A, E, NU, RHO, T0
+    from ..problems.absorbing_column import A, E, NU, RHO, T0
     H = W3_HEIGHT
     nb = int(round(W3_BELOW / dx)) if method == "layer" else 0
     na = int(round(W3_ABOVE / dx))
@@ -205,7 +205,7 @@ def _layer_column(integ, spec, width, dt, comm):
     """W1 column with a particle-layer base: the fixed-base column, base released, side
     rollers fixed again, and fm.ParticleLayer on the lowest particle row."""
     import fenicsmpm as fm
-    from ..absorbing_column import absorbing_column
+    from ..problems.absorbing_column import absorbing_column
     dx = spec["dx"]
     sim, exact = absorbing_column(integ, base="fixed", dx=dx, width=width, dt=dt,
                                   depths=(50.0, 100.0), comm=comm)
@@ -219,7 +219,7 @@ def _layer_column(integ, spec, width, dt, comm):
 
 def run_scene(spec, quick, comm):
     import fenicsmpm as fm
-    from ..absorbing_column import absorbing_column, histories, summary
+    from ..problems.absorbing_column import absorbing_column, histories, summary
     dx, c = spec["dx"], spec["courant"]
     w3 = spec["bench"] == "W3"
     width = dx if quick else max(dx, 1.0)
@@ -242,10 +242,7 @@ def run_scene(spec, quick, comm):
         wall = timing["wall_s"]
     except RuntimeError as err:              # raised on every rank (e.g. particles left the mesh)
         failed, steps = str(err), sim.step_count
-        wall = time.perf_counter() - t_start     # until it stopped, warm-up included
-        if comm.size > 1:
-            from mpi4py import MPI
-            wall = comm.allreduce(wall, op=MPI.MAX)
+        wall = common.gmax(comm, time.perf_counter() - t_start)   # until it stopped, warm-up included
     cfg = dict(integrator=spec["integrator"], scheme="MUSL" if integ.explicit else "Newmark",
                shape="Q1 (standard MPM)", h=dx, dt=sim.dt, ppc=4, per_cell=2,
                cell_type="quadrilateral", base=spec["base"], group=spec["group"],
@@ -417,10 +414,8 @@ def plot(doc, path, comm):
     ax6.legend(fontsize=6)
     for ax in (ax1, ax2, ax3, ax4, ax5, ax6):
         ax.grid(alpha=0.3, which="both")
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm,
-                              title=f"fenicsmpm absorbing boundaries, W1 and W3 columns{quick}\n"
-                                    f"{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(
+        doc, "absorbing boundaries, W1 and W3 columns"))
 
 
 def print_report(doc, comm):
@@ -434,8 +429,7 @@ def print_report(doc, comm):
             ("u_base [m]", lambda r: r["metrics"].get("base_displacement")),
             ("tail σ", lambda r: r["metrics"].get("tail_stress")),
             ("failed at [s]", lambda r: r["metrics"].get("failed_at"))]
-    common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
-                       f"{' (quick)' if doc['quick'] else ''}: {doc['machine']['ranks']} rank(s)")
+    common.print_table(doc["runs"], cols, comm, title=common.table_title(doc))
     for n in doc["notes"]:
         common.say(comm, f"  note: {n}")
 
@@ -443,8 +437,7 @@ def print_report(doc, comm):
 def run(quick=False, out="bench-results", comm=None, tiny=False, verbose=True):
     """Run the case, write out/absorbing.json and out/absorbing.png, print the table.
     tiny: four short runs (for the tests). Returns the result dict (on every rank)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     quick = quick or tiny
     runs = []
     for spec in scenes(quick, tiny):

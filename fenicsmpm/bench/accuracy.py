@@ -57,7 +57,7 @@ LOAD_STEPS = 5
 PER_CELL = 2
 # V1 amplitudes: 0.01 keeps the free-end particle (displacement amplitude v0 / w = 6.4e-4)
 # inside its cell on every mesh up to n = 160 (h / 4 = 1.6e-3), so the errors are those of the
-# discretization; 0.1 (the default of verification.vibrating_bar, used by the tests and the
+# discretization; 0.1 (the default of problems.elastic.vibrating_bar, used by the tests and the
 # demo) moves it by 6.4e-3, more than h / 4 from n = 40 on: it then crosses into the empty
 # cell beyond the bar (standard MPM's cell-crossing error at a free surface).
 V1_AMPLITUDES = (0.01, 0.1)
@@ -72,19 +72,6 @@ FITTED = {"V1": ("period_error", "rms_velocity_error", "abs_energy_drift", "max_
 PLOTTED = {"V1": (("period_error", "period"), ("rms_velocity_error", "RMS velocity")),
            "V2": (("stress_error", "stress (normalized L1)"),
                   ("top_settlement_error", "top settlement"))}
-
-
-def _max(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
-
-
-def _sum(comm, x):
-    return comm.allreduce(x) if comm.size > 1 else x
-
-
-def _global_cells(sim):
-    return _sum(sim.comm, sim.grid.n_owned_cells)
 
 
 def zero_crossings(t, v, merge=0.0):
@@ -114,19 +101,6 @@ def measured_period(t, v, merge=0.0):
     return 2.0 * np.polyfit(np.arange(len(tz)), tz, 1)[0]
 
 
-def _timed_steps(sim, steps, every=None):
-    """Advance `steps` steps; returns the wall time inside sim.step (slowest rank) and, when
-    `every` is a callable, its value after each step (called outside the timing)."""
-    wall, samples = 0.0, []
-    for _ in range(steps):
-        t0 = time.perf_counter()
-        sim.step()
-        wall += time.perf_counter() - t0
-        if every is not None:
-            samples.append(every())
-    return _max(sim.comm, wall), samples
-
-
 def _integrator(series):
     import fenicsmpm as fm
     if series == "explicit-MUSL":
@@ -137,13 +111,8 @@ def _integrator(series):
 
 
 def _best_of(repeats, fn, *args):
-    """Run fn(*args) (a deterministic run returning its record) `repeats` times; the first
-    record with wall_s the fastest repetition (all kept in wall_s_repeats)."""
-    recs = [fn(*args) for _ in range(repeats)]
-    rec = recs[0]
-    walls = [r["wall_s"] for r in recs]
-    rec["wall_s_repeats"] = walls
-    rec["wall_s"] = min(walls)
+    """common.best_of, with wall_per_step_s of the fastest repetition."""
+    rec = common.best_of(repeats, fn, *args)
     rec["metrics"]["wall_per_step_s"] = rec["wall_s"] / rec["steps"]
     return rec
 
@@ -159,14 +128,14 @@ def run_v2(n_cells, comm, repeats=1):
 
 
 def _run_v1(series, n_cells, comm, periods, v0):
-    from ..verification import vibrating_bar
+    from ..problems.elastic import vibrating_bar
     integ = _integrator(series)
     t0 = time.perf_counter()
     sim, exact = vibrating_bar(integ, n_cells=n_cells, per_cell=PER_CELL, cfl=CFL, v0=v0,
                                comm=comm)
     L, h, T = 1.0, exact["h"], exact["period"]
     probe = sim.probe((L, h / 2), fields=("velocity", "position"))
-    setup = _max(comm, time.perf_counter() - t0)
+    setup = common.gmax(comm, time.perf_counter() - t0)
 
     def energy():
         e = sim.energy()
@@ -174,7 +143,7 @@ def _run_v1(series, n_cells, comm, periods, v0):
 
     E0 = energy()
     steps = int(math.ceil(periods * T / sim.dt - 1e-9))
-    wall, E = _timed_steps(sim, steps, energy)
+    wall, E = common.timed_run(sim, steps, energy)
     E = np.array([E0] + E)
     d = probe.data()
     X = d["position_x"][0]
@@ -201,7 +170,7 @@ def _run_v1(series, n_cells, comm, periods, v0):
                dt_rule=f"cfl {CFL:g} * h / c" if integ.explicit
                else f"{NEWMARK_DT_FACTOR:g} * h / c")
     rec = common.make_record(f"V1 {series} v0={v0:g} n={n_cells}", cfg,
-                             sim.particles.n_global, _global_cells(sim), steps, wall, m)
+                             sim.particles.n_global, common.global_cells(sim), steps, wall, m)
     rec.update(problem="V1", series=f"{series} v0={v0:g}")
     if not integ.explicit:
         integ.system.destroy()
@@ -210,22 +179,22 @@ def _run_v1(series, n_cells, comm, periods, v0):
 
 def _run_v2(n_cells, comm):
     from mpi4py import MPI
-    from ..verification import self_weight_column
+    from ..problems.elastic import self_weight_column
     integ = _integrator("QuasiStatic")
     t0 = time.perf_counter()
     sim, exact = self_weight_column(integ, n_cells=n_cells, per_cell=PER_CELL, comm=comm, **V2)
-    setup = _max(comm, time.perf_counter() - t0)
-    wall, _ = _timed_steps(sim, LOAD_STEPS)
+    setup = common.gmax(comm, time.perf_counter() - t0)
+    wall, _ = common.timed_run(sim, LOAD_STEPS)
     p = sim.particles
     H, rho, g = V2["height"], V2["density"], V2["g"]
     Y = (p.x - p.u)[:, 1]
-    num = _sum(comm, float(np.sum(np.abs(p.stress[:, 1, 1] - exact["stress_yy"](Y)) * p.V0)))
-    vol = _sum(comm, float(np.sum(p.V0)))
+    num = common.gsum(comm, float(np.sum(np.abs(p.stress[:, 1, 1] - exact["stress_yy"](Y)) * p.V0)))
+    vol = common.gsum(comm, float(np.sum(p.V0)))
     stress_error = num / (rho * g * H * vol)
     ytop = comm.allreduce(float(Y.max()) if len(Y) else -np.inf, op=MPI.MAX)
     top = np.abs(Y - ytop) < 1e-9 * H
-    n_top = _sum(comm, int(np.count_nonzero(top)))
-    uy = _sum(comm, float(p.u[top, 1].sum())) / n_top
+    n_top = common.gsum(comm, int(np.count_nonzero(top)))
+    uy = common.gsum(comm, float(p.u[top, 1].sum())) / n_top
     ref = exact["top_settlement"]
     m = dict(stress_error=stress_error,
              top_settlement_error=abs(uy - exact["displacement_y"](ytop)) / ref,
@@ -236,7 +205,7 @@ def _run_v2(n_cells, comm):
                scheme="QuasiStatic", shape="Q1 (standard MPM)", h=exact["h"], dt=sim.dt,
                ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
                load_steps=LOAD_STEPS, **V2)
-    rec = common.make_record(f"V2 QuasiStatic n={n_cells}", cfg, p.n_global, _global_cells(sim),
+    rec = common.make_record(f"V2 QuasiStatic n={n_cells}", cfg, p.n_global, common.global_cells(sim),
                              LOAD_STEPS, wall, m)
     rec.update(problem="V2", series="QuasiStatic")
     integ.system.destroy()
@@ -245,7 +214,7 @@ def _run_v2(n_cells, comm):
 
 def _warm_up(comm):
     """Untimed short runs of each integrator: numba's cached kernels are loaded here."""
-    from ..verification import self_weight_column, vibrating_bar
+    from ..problems.elastic import self_weight_column, vibrating_bar
     for series in ("explicit-MUSL", "Newmark"):
         integ = _integrator(series)
         sim, _ = vibrating_bar(integ, n_cells=4, per_cell=PER_CELL, cfl=CFL, comm=comm)
@@ -261,30 +230,10 @@ def _warm_up(comm):
     integ.system.destroy()
 
 
-def fit_slope(h, err):
-    """Least-squares slope of log(err) against log(h) over the positive finite errors
-    (None with fewer than two)."""
-    h, err = np.asarray(h, dtype=float), np.array([np.nan if e is None else e for e in err],
-                                                  dtype=float)
-    ok = np.isfinite(err) & (err > 0)
-    if np.count_nonzero(ok) < 2:
-        return None
-    return float(np.polyfit(np.log(h[ok]), np.log(err[ok]), 1)[0])
-
-
 def convergence(runs):
     """Per (problem, series, metric): cell sizes, errors, wall times, fitted slope."""
-    out = []
-    for problem, metrics in FITTED.items():
-        for series in dict.fromkeys(r["series"] for r in runs if r["problem"] == problem):
-            rs = sorted((r for r in runs if r["problem"] == problem and r["series"] == series),
-                        key=lambda r: -r["config"]["h"])
-            h = [r["config"]["h"] for r in rs]
-            for metric in metrics:
-                err = [r["metrics"].get(metric) for r in rs]
-                out.append(dict(problem=problem, series=series, metric=metric, h=h, error=err,
-                                wall_s=[r["wall_s"] for r in rs], slope=fit_slope(h, err)))
-    return out
+    return [c for problem, metrics in FITTED.items()
+            for c in common.convergence(runs, metrics, finest=False, problem=problem)]
 
 
 def _find(conv, problem, series, metric):
@@ -309,8 +258,6 @@ def _panels(doc):
 
 def plot(doc, out, comm):
     conv = doc["convergence"]
-    quick = " (quick)" if doc.get("quick") else ""
-    title = common.machine_title(doc["machine"])
     panels = _panels(doc)
     paths = []
     for kind in ("convergence", "pareto"):
@@ -346,7 +293,7 @@ def plot(doc, out, comm):
         what = "error against cell size" if kind == "convergence" else \
             "error against run time (Pareto view)"
         paths.append(common.save_figure(fig, os.path.join(out, name), comm,
-                                        title=f"fenicsmpm accuracy{quick}: {what}\n{title}"))
+                                        title=common.figure_title(doc, "accuracy", f": {what}")))
     return paths
 
 
@@ -361,8 +308,7 @@ def print_report(doc, comm):
             ("energy drift", lambda r: r["metrics"]["energy_drift"]),
             ("max |dE|/E0", lambda r: r["metrics"]["max_energy_error"]),
             ("ampl/(h/4)", lambda r: r["metrics"]["amplitude_over_quarter_cell"])]
-    common.print_table(v1, cols, comm, title=f"\n== {CASE}{' (quick)' if doc['quick'] else ''}: "
-                       f"{doc['machine']['ranks']} rank(s)\nV1 vibrating bar, {PERIODS} periods "
+    common.print_table(v1, cols, comm, title=common.table_title(doc) + f"\nV1 vibrating bar, {PERIODS} periods "
                        f"(errors relative: period to T, RMS velocity to v0, energy to E0;\n"
                        f"ampl/(h/4) > 1: the free-end particle crosses into the empty cell beyond "
                        f"the bar)")
@@ -387,8 +333,7 @@ def run(quick=False, out="bench-results", comm=None, v1_cells=None, v2_cells=Non
     """Run the case, write out/accuracy.json and the two PNGs, print the tables; returns the
     result dict (on every rank). v1_cells / v2_cells override the cell counts (a tiny run:
     v1_cells=(10, 20), v2_cells=(5, 10)), v1_amplitudes the V1 velocity amplitudes v0."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     mode = "quick" if quick else "full"
     v1_cells = tuple(V1_CELLS[mode] if v1_cells is None else v1_cells)
     v2_cells = tuple(V2_CELLS[mode] if v2_cells is None else v2_cells)
@@ -425,10 +370,6 @@ def run(quick=False, out="bench-results", comm=None, v1_cells=None, v2_cells=Non
     doc = common.result(CASE, runs, comm, quick=quick, periods=periods,
                         v1_amplitudes=v1_amplitudes, repeats=repeats,
                         convergence=convergence(runs),
-                        total_wall_s=_max(comm, time.perf_counter() - t_start),
+                        total_wall_s=common.gmax(comm, time.perf_counter() - t_start),
                         load_average_1min_start=load_start)
-    common.write_result(doc, out, comm)
-    plot(doc, out, comm)
-    if verbose:
-        print_report(doc, comm)
-    return doc
+    return common.finish(doc, out, comm, lambda d, _, c: plot(d, out, c), print_report, verbose)

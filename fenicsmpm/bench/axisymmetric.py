@@ -1,5 +1,5 @@
 """Benchmark case `axisymmetric`: the thick cylinder under internal pressure
-(fenicsmpm.verification_cylinder), error against cell size and wall time.
+(fenicsmpm.problems.cylinder), error against cell size and wall time.
 
 Runs: "lame" (linear elastic, Lame solution: the cell-mean sigma_rr error relative to p,
 sigma_tt and u_r relative errors) and "hill" (Mohr-Coulomb phi = 0, plastic to rho = 1.5 b/2:
@@ -8,10 +8,8 @@ nx radial cells (nx/4 axial), 2 x 2 particles per cell, quasi-static (1 and 5 lo
 Writes out/axisymmetric.json and out/axisymmetric.png (error vs h and vs wall time)."""
 import os
 
-import numpy as np
-
 from . import common
-from .. import verification_cylinder as vc
+from ..problems import cylinder as vc
 
 CASE = "axisymmetric"
 P, E, NU, C, RHO = 1.0e4, 1.0e8, 0.3, 1.0e4, 1.5
@@ -37,8 +35,7 @@ def _one(kind, nx, shape, comm):
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     _one("hill", 4, "mpm", comm)                       # JIT and form compilation warm-up
     runs = []
@@ -55,30 +52,18 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
                 say(f"{kind} {shape} nx = {nx}: error {m['error']:.3e}, wall {wall:.3f} s")
     doc = common.result(CASE, runs, comm, quick=quick,
                         notes=["Stresses: cell means at the cell centres (fenicsmpm."
-                               "verification_cylinder); error relative to p (sigma_rr, Hill) "
+                               "problems.cylinder); error relative to p (sigma_rr, Hill) "
                                "or to the local exact value (sigma_tt)."])
     common.write_result(doc, out, comm)
     common.print_table([dict(name=r["name"], h=r["config"]["h"], err=r["metrics"]["error"],
                              wall=r["wall_s"]) for r in runs],
                        [("run", "name"), ("h", "h"), ("stress error", "err"), ("wall s", "wall")],
                        comm=comm)
-    fig, ax = common.new_figure(2, 1)
-    for kind, marker in (("lame", "o"), ("hill", "s")):
-        for shape, color in zip(SHAPES, ("tab:blue", "tab:orange")):
-            rs = [r for r in runs if r["config"]["problem"] == kind and r["config"]["shape"] == shape]
-            h = [r["config"]["h"] for r in rs]
-            e = [r["metrics"]["error"] for r in rs]
-            w = [r["wall_s"] for r in rs]
-            ls = "-" if shape == "mpm" else "--"
-            ax[0, 0].loglog(h, e, marker + ls, color=color, label=f"{kind} {shape}")
-            ax[0, 1].loglog(w, e, marker + ls, color=color, label=f"{kind} {shape}")
-    ax[0, 0].set_xlabel("cell size h [m]")
-    ax[0, 1].set_xlabel("wall time [s]")
-    for a in ax[0]:
-        a.set_ylabel("max stress error (cell means)")
-        a.legend(fontsize=7)
-    ax[0, 0].set_title("thick cylinder: error vs h", fontsize=9)
-    ax[0, 1].set_title("error vs wall time", fontsize=9)
-    common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,
-                       title=common.machine_title(doc["machine"]))
+    curves = [(f"{kind} {shape}", marker + ("-" if shape == "mpm" else "--"), color,
+               [r for r in runs if r["config"]["problem"] == kind and r["config"]["shape"] == shape],
+               "error")
+              for kind, marker in (("lame", "o"), ("hill", "s"))
+              for shape, color in zip(SHAPES, ("tab:blue", "tab:orange"))]
+    common.error_figure(doc, curves, "max stress error (cell means)", os.path.join(out, f"{CASE}.png"),
+                        comm, ("thick cylinder: error vs h", "error vs wall time"))
     return doc

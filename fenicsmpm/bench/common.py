@@ -1,5 +1,7 @@
-"""Shared pieces of the benchmark cases: the JSON record format, machine information,
-timing of simulation steps, memory measurement, table printing and plotting.
+"""Shared machinery of the benchmark cases: the JSON record format, machine information, MPI
+reductions, timing of simulation steps, sweeps and convergence fits, memory measurement,
+table printing and plotting; `finish` writes a case's JSON, figure and table. A case module
+holds only its scenes and its metrics.
 
 Result file DIR/CASE.json (a stable format for every case):
     {"case": str,
@@ -26,7 +28,9 @@ import numpy as np
 
 __all__ = ["machine_info", "make_record", "result", "write_result", "print_table",
            "format_number", "machine_title", "new_figure", "stacked_bars", "save_figure",
-           "time_steps", "MemoryProbe", "particle_bytes", "say"]
+           "time_steps", "MemoryProbe", "particle_bytes", "say", "world", "gmax", "gmin",
+           "gsum", "global_cells", "timed_run", "best_of", "fit_slope", "convergence",
+           "pareto_front", "table_title", "figure_title", "finish"]
 
 
 # ---------------------------------------------------------------------------- machine
@@ -141,7 +145,137 @@ def write_result(doc, out, comm):
     return path
 
 
+def finish(doc, out, comm, plot=None, report=None, verbose=True):
+    """Write out/CASE.json, then plot(doc, out/CASE.png, comm) and, when verbose,
+    report(doc, comm); returns doc."""
+    write_result(doc, out, comm)
+    if plot is not None:
+        plot(doc, os.path.join(out, f"{doc['case']}.png"), comm)
+    if verbose and report is not None:
+        report(doc, comm)
+    return doc
+
+
+# ---------------------------------------------------------------------------- MPI
+def world(comm):
+    """comm, or MPI.COMM_WORLD for None."""
+    from mpi4py import MPI
+    return MPI.COMM_WORLD if comm is None else comm
+
+
+def gmax(comm, x):
+    """Largest x over the ranks."""
+    from mpi4py import MPI
+    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
+
+
+def gmin(comm, x):
+    """Smallest x over the ranks."""
+    from mpi4py import MPI
+    return comm.allreduce(x, op=MPI.MIN) if comm.size > 1 else x
+
+
+def gsum(comm, x):
+    """Sum of x over the ranks."""
+    return comm.allreduce(x) if comm.size > 1 else x
+
+
+def global_cells(sim):
+    """Number of cells of the mesh (owned cells summed over ranks)."""
+    return gsum(sim.comm, sim.grid.n_owned_cells)
+
+
+# ---------------------------------------------------------------------------- sweeps and fits
+def check_cells(case, name, cells, minimum=2, count=2):
+    """cells as a tuple; ValueError unless at least `count` integers >= `minimum`."""
+    cells = tuple(cells)
+    if len(cells) < count or any(not (isinstance(n, (int, np.integer)) and n >= minimum) for n in cells):
+        raise ValueError(f"{case}: {name!r} must be at least {count} integers >= {minimum}, got {cells!r}")
+    return cells
+
+
+def sweep(series, cells, run_one, comm, describe=None):
+    """Refinement sweep: per series (a tuple of run_one's leading arguments) an untimed
+    warm-up run_one(*series, 2, comm) (JIT / cache loading; its time in jit["a b c"]), then
+    run_one(*series, n, comm) for n in cells(series). describe(record): a progress line.
+    Returns (runs, jit)."""
+    runs, jit = [], {}
+    for s in series:
+        t0 = time.perf_counter()
+        run_one(*s, 2, comm)
+        jit[" ".join(s)] = gmax(comm, time.perf_counter() - t0)
+        for n in cells(s):
+            runs.append(run_one(*s, n, comm))
+            if describe:
+                say(comm, describe(runs[-1]))
+    return runs, jit
+
+
+def best_of(repeats, fn, *args):
+    """Run fn(*args) (a deterministic run returning its record) `repeats` times; the first
+    record with wall_s the fastest repetition (all kept in wall_s_repeats)."""
+    recs = [fn(*args) for _ in range(repeats)]
+    walls = [r["wall_s"] for r in recs]
+    rec = recs[0]
+    rec["wall_s"] = min(walls)
+    rec["wall_s_repeats"] = walls
+    return rec
+
+
+def fit_slope(h, err):
+    """Least-squares slope of log(err) against log(h) over the positive finite errors
+    (None with fewer than two)."""
+    h = np.asarray(h, dtype=float)
+    e = np.array([np.nan if v is None else v for v in err], dtype=float)
+    ok = np.isfinite(e) & (e > 0)
+    if np.count_nonzero(ok) < 2:
+        return None
+    return float(np.polyfit(np.log(h[ok]), np.log(e[ok]), 1)[0])
+
+
+def convergence(runs, metrics, finest=True, **tags):
+    """Per (series, metric): h (coarse to fine), errors, wall times, the slope fitted over the
+    sweep and (finest) the slope of the two finest runs. tags (e.g. problem="V1") select
+    the runs with those keys and are copied into each entry."""
+    runs = [r for r in runs if all(r.get(k) == v for k, v in tags.items())]
+    out = []
+    for series in dict.fromkeys(r["series"] for r in runs):
+        rs = sorted((r for r in runs if r["series"] == series), key=lambda r: -r["config"]["h"])
+        h = [r["config"]["h"] for r in rs]
+        for metric in metrics:
+            err = [r["metrics"].get(metric) for r in rs]
+            c = dict(tags, series=series, metric=metric, h=h, error=err,
+                     wall_s=[r["wall_s"] for r in rs], slope=fit_slope(h, err))
+            if finest:
+                c["slope_finest"] = fit_slope(h[-2:], err[-2:]) if len(h) > 1 else None
+            out.append(c)
+    return out
+
+
+def pareto_front(points):
+    """Indices of the points (wall, error) not dominated by another (less time and error)."""
+    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
+    front, best = [], math.inf
+    for i in order:
+        if points[i][1] is not None and points[i][1] < best:
+            front.append(i)
+            best = points[i][1]
+    return front
+
+
 # ---------------------------------------------------------------------------- printing
+def table_title(doc, what=None):
+    """Heading of a case's table: "== CASE (quick): N rank(s)" (what replaces the ranks)."""
+    quick = " (quick)" if doc.get("quick") else ""
+    return f"\n== {doc['case']}{quick}: " + (what or f"{doc['machine']['ranks']} rank(s)")
+
+
+def figure_title(doc, what, tail=""):
+    """Title of a case's figure: "fenicsmpm WHAT (quick)TAIL" over the machine line."""
+    quick = " (quick)" if doc.get("quick") else ""
+    return f"fenicsmpm {what}{quick}{tail}\n{machine_title(doc['machine'])}"
+
+
 def say(comm, *args, **kw):
     """print on rank 0 (flushed)."""
     if comm.rank == 0:
@@ -231,6 +365,24 @@ def stacked_bars(ax, labels, stacks, annotations=None, ylabel=None, colors=None,
     return bottom
 
 
+def error_figure(doc, curves, ylabel, path, comm, titles=()):
+    """Two log-log panels, error against cell size h and against wall time, one line per
+    curve (label, style, color, runs, metric); titles: of the panels. Saved to path."""
+    fig, ax = new_figure(2, 1)
+    for label, style, color, runs, metric in curves:
+        e = [r["metrics"][metric] for r in runs]
+        ax[0, 0].loglog([r["config"]["h"] for r in runs], e, style, color=color, label=label)
+        ax[0, 1].loglog([r["wall_s"] for r in runs], e, style, color=color, label=label)
+    ax[0, 0].set_xlabel("cell size h [m]")
+    ax[0, 1].set_xlabel("wall time [s]")
+    for a in ax[0]:
+        a.set_ylabel(ylabel)
+        a.legend(fontsize=7)
+    for a, t in zip(ax[0], titles):
+        a.set_title(t, fontsize=9)
+    return save_figure(fig, path, comm, title=machine_title(doc["machine"]))
+
+
 def save_figure(fig, path, comm, title=None):
     """Save on rank 0 and close; returns path."""
     import matplotlib.pyplot as plt
@@ -247,6 +399,19 @@ def save_figure(fig, path, comm, title=None):
 
 
 # ---------------------------------------------------------------------------- timing
+def timed_run(sim, steps, every=None):
+    """Advance `steps` steps; returns the wall time inside sim.step (slowest rank) and, when
+    `every` is a callable, its value after each step (called outside the timing)."""
+    wall, samples = 0.0, []
+    for _ in range(steps):
+        t0 = time.perf_counter()
+        sim.step()
+        wall += time.perf_counter() - t0
+        if every is not None:
+            samples.append(every())
+    return gmax(sim.comm, wall), samples
+
+
 def time_steps(sim, steps, warmup=0):
     """Run `warmup` steps (absorbing JIT compilation), reset sim.timers, then time `steps`
     steps with time.perf_counter between barriers.

@@ -59,9 +59,8 @@ def incline(theta_deg, mu, algorithm="multi-velocity", h=0.4, ppc=2, t_end=1.0, 
     """Run the C1 scene; returns dict(t, x (centre displacement series), x_end, x_exact, error,
     wall_s, steps, sim). Collective under MPI (every rank gets the same numbers)."""
     from dolfinx import mesh
-    from mpi4py import MPI
     import fenicsmpm as fm
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     x_run = float(exact_x(theta_deg, mu, t_end))
     L = length if length is not None else h * math.ceil((2 * R + x_run + 2.5) / h)
     H = h * math.ceil((PLANE_T + 2 * R + 0.6) / h)
@@ -83,7 +82,7 @@ def incline(theta_deg, mu, algorithm="multi-velocity", h=0.4, ppc=2, t_end=1.0, 
             opts.setdefault("penalty", dict(k_n=(K_CYL + 4 * G_CYL / 3) / h))
         integ = fm.ExplicitContact(scheme, mu=mu, **opts)
         if algorithm == "penalty":
-            from ..integrators.penalty_contact import circle, line
+            from ..contact.penalty import circle, line
             integ.add_polyline(0, circle((xc, yc), R, round(2 * math.pi * R / SEGMENT)), closed=True)
             integ.add_polyline(1, line((L, PLANE_T), (0.0, PLANE_T), round(L / SEGMENT)))
     elif algorithm == "single-field":
@@ -110,9 +109,7 @@ def incline(theta_deg, mu, algorithm="multi-velocity", h=0.4, ppc=2, t_end=1.0, 
         if (k + 1) % every == 0 or k == steps - 1:
             ts.append(sim.t)
             xs.append(centre())
-    wall = time.perf_counter() - t0
-    if comm.size > 1:
-        wall = comm.allreduce(wall, op=MPI.MAX)
+    wall = common.gmax(comm, time.perf_counter() - t0)
     x_end = xs[-1]
     x_ex = float(exact_x(theta_deg, mu, sim.t))
     return dict(t=np.array(ts), x=np.array(xs), x_end=x_end, x_exact=x_ex,
@@ -125,8 +122,7 @@ SIZES = {"quick": dict(cells=(0.4,), t_end=1.0), "full": dict(cells=(0.4, 0.2, 0
 
 def run(quick=False, out="bench-results", comm=None, verbose=True, cells=None, t_end=None):
     """Run every case x algorithm x cell size; write out/contact.json and out/contact.png."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     S = dict(SIZES["quick" if quick else "full"])
     if cells is not None:
         S["cells"] = tuple(cells)

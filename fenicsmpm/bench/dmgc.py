@@ -7,15 +7,14 @@ DM-GC is a small-strain technique here: on the large-deformation V2 column Newto
 import os
 
 from . import common
-from ..integrators.dmgc import self_weight_errors
+from ..problems.elastic import self_weight_errors
 
 CASE = "dmgc"
 SIZES = {"quick": (5, 10, 20), "full": (5, 10, 20, 40)}
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     self_weight_errors("dmgc", n_cells=4, comm=comm)          # JIT warm-up
     self_weight_errors("standard", n_cells=4, comm=comm)
@@ -41,21 +40,11 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
                              u=r["metrics"]["displacement_error"], wall=r["wall_s"]) for r in runs],
                        [("run", "name"), ("stress error", "s"), ("displ. error", "u"), ("wall s", "wall")],
                        comm=comm)
-    fig, ax = common.new_figure(2, 1)
-    for shape, color in (("ugimp", "tab:blue"), ("cpgimp", "tab:orange")):
-        for method, ls in (("dmgc", "-o"), ("standard", "--s")):
-            rs = [r for r in runs if r["config"]["shape"] == shape and r["config"]["method"] == method]
-            lab = f"{method} {shape}"
-            ax[0, 0].loglog([r["config"]["h"] for r in rs], [r["metrics"]["stress_error"] for r in rs],
-                            ls, color=color, label=lab)
-            ax[0, 1].loglog([r["wall_s"] for r in rs], [r["metrics"]["stress_error"] for r in rs],
-                            ls, color=color, label=lab)
-    ax[0, 0].set_xlabel("cell size h [m]")
-    ax[0, 1].set_xlabel("wall time [s]")
-    for a in ax[0]:
-        a.set_ylabel("stress error / (rho g H)")
-        a.legend(fontsize=7)
-    ax[0, 0].set_title("V2 small strain: DM-GC vs implicit GIMP", fontsize=9)
-    common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,
-                       title=common.machine_title(doc["machine"]))
+    curves = [(f"{method} {shape}", ls, color,
+               [r for r in runs if r["config"]["shape"] == shape and r["config"]["method"] == method],
+               "stress_error")
+              for shape, color in (("ugimp", "tab:blue"), ("cpgimp", "tab:orange"))
+              for method, ls in (("dmgc", "-o"), ("standard", "--s"))]
+    common.error_figure(doc, curves, "stress error / (rho g H)", os.path.join(out, f"{CASE}.png"),
+                        comm, ("V2 small strain: DM-GC vs implicit GIMP",))
     return doc

@@ -1,5 +1,5 @@
 """Benchmark case `mms`: run time against error on V3, the axis-aligned manufactured solution
-(fenicsmpm.verification_mms; BENCHMARKS.md V3, Kamojjala et al. 2013).
+(fenicsmpm.problems.mms; BENCHMARKS.md V3, Kamojjala et al. 2013).
 
     python -m fenicsmpm.bench mms [--quick]
 
@@ -11,7 +11,7 @@ with every shape family ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2"), and implic
 n = 8, 16, 32, 64 (quick: 4, 6, 8, 12).
 
 Metrics per run: displacement_error and stress_error, the normalized L2 errors at the
-particles (verification_mms.errors). wall_s is the time inside the time loop only; the
+particles (problems.mms.errors). wall_s is the time inside the time loop only; the
 one-time JIT/cache loading and form compilation are absorbed by an untimed warm-up run of
 each series, whose duration is reported in "jit_s" (per series); set-up (mesh, particles)
 is reported as setup_s.
@@ -22,8 +22,7 @@ wall_s, least-squares slope over the sweep and the slope of the finest pair), "s
 mms_convergence.png (error against h, fitted slopes in the legend), mms_pareto.png (error
 against wall time with the Pareto front) and a table.
 
-The sweep, fitting, plotting and summary helpers here are shared with `self-weight`."""
-import math
+The plotting and summary helpers here are shared with `self-weight`."""
 import os
 import time
 
@@ -38,51 +37,6 @@ TARGETS = (1e-2, 1e-3)
 METRICS = (("displacement_error", "displacement"), ("stress_error", "stress"))
 PER_CELL = 2
 CFL = 0.2
-
-
-def _max(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
-
-
-def _sum(comm, x):
-    return comm.allreduce(x) if comm.size > 1 else x
-
-
-def fit_slope(h, err):
-    """Least-squares slope of log(err) against log(h) over positive finite errors (None with
-    fewer than two)."""
-    h = np.asarray(h, dtype=float)
-    e = np.array([np.nan if v is None else v for v in err], dtype=float)
-    ok = np.isfinite(e) & (e > 0)
-    if np.count_nonzero(ok) < 2:
-        return None
-    return float(np.polyfit(np.log(h[ok]), np.log(e[ok]), 1)[0])
-
-
-def timed_run(sim, steps):
-    """Advance `steps` steps; wall time inside sim.step (slowest rank)."""
-    wall = 0.0
-    for _ in range(steps):
-        t0 = time.perf_counter()
-        sim.step()
-        wall += time.perf_counter() - t0
-    return _max(sim.comm, wall)
-
-
-def convergence(runs, metrics):
-    """Per (series, metric): h (coarse to fine), errors, wall times, fitted slope over the
-    sweep and the slope of the two finest runs."""
-    out = []
-    for series in dict.fromkeys(r["series"] for r in runs):
-        rs = sorted((r for r in runs if r["series"] == series), key=lambda r: -r["config"]["h"])
-        h = [r["config"]["h"] for r in rs]
-        for metric in metrics:
-            err = [r["metrics"].get(metric) for r in rs]
-            out.append(dict(series=series, metric=metric, h=h, error=err,
-                            wall_s=[r["wall_s"] for r in rs], slope=fit_slope(h, err),
-                            slope_finest=fit_slope(h[-2:], err[-2:]) if len(h) > 1 else None))
-    return out
 
 
 def cheapest(runs, metric, target):
@@ -106,22 +60,9 @@ def summary(runs, conv, metrics, targets=TARGETS):
     return dict(orders=orders, cheapest=best)
 
 
-def pareto_front(points):
-    """Indices of the points (wall, error) not dominated by another (less time and error)."""
-    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1]))
-    front, best = [], math.inf
-    for i in order:
-        if points[i][1] is not None and points[i][1] < best:
-            front.append(i)
-            best = points[i][1]
-    return front
-
-
 def plot(doc, out, comm, case, metrics, title_extra="", problems=None):
     """case_convergence.png and case_pareto.png: one panel per (problem, metric)."""
     conv = doc["convergence"]
-    quick = " (quick)" if doc.get("quick") else ""
-    mtitle = common.machine_title(doc["machine"])
     problems = problems or [(None, [s for s in dict.fromkeys(c["series"] for c in conv)])]
     panels = [(prob, series, m, lbl) for prob, series in problems for m, lbl in metrics]
     paths = []
@@ -143,7 +84,7 @@ def plot(doc, out, comm, case, metrics, title_extra="", problems=None):
                     ax.loglog(c["wall_s"], e, "o-", ms=4, label=series)
                     allpts += list(zip(c["wall_s"], c["error"]))
             if kind == "pareto" and allpts:
-                front = pareto_front(allpts)
+                front = common.pareto_front(allpts)
                 ax.loglog([allpts[i][0] for i in front], [allpts[i][1] for i in front], "k--",
                           lw=1, label="Pareto front")
             for tgt in TARGETS:
@@ -156,7 +97,7 @@ def plot(doc, out, comm, case, metrics, title_extra="", problems=None):
         what = "error against cell size" if kind == "convergence" else \
             "error against run time (Pareto view)"
         paths.append(common.save_figure(fig, os.path.join(out, f"{case}_{kind}.png"), comm,
-                                        title=f"fenicsmpm {case}{quick}{title_extra}: {what}\n{mtitle}"))
+                                        title=common.figure_title(doc, case, f"{title_extra}: {what}")))
     return paths
 
 
@@ -164,8 +105,7 @@ def print_summary(doc, comm, case, metrics):
     cols = [("run", "name"), ("particles", "n_particles"), ("cells", "n_cells"),
             ("steps", "steps"), ("h", lambda r: r["config"]["h"]), ("wall [s]", "wall_s")]
     cols += [(lbl + " err", (lambda m: lambda r: r["metrics"].get(m))(m)) for m, lbl in metrics]
-    common.print_table(doc["runs"], cols, comm, title=f"\n== {case}{' (quick)' if doc['quick'] else ''}: "
-                       f"{doc['machine']['ranks']} rank(s)")
+    common.print_table(doc["runs"], cols, comm, title=common.table_title(doc))
     common.print_table(doc["summary"]["orders"],
                        [("series", "series"), ("metric", "metric"), ("order (fit)", "slope"),
                         ("order (finest pair)", "slope_finest"), ("error at finest", "finest_error")],
@@ -187,13 +127,13 @@ def _integrator(kind, scheme):
 
 
 def run_one(kind, scheme, shape, n_cells, comm):
-    from ..verification_mms import axis_aligned, errors
+    from ..problems.mms import axis_aligned, errors
     integ = _integrator(kind, scheme)
     t0 = time.perf_counter()
     sim, ex = axis_aligned(integ, n_cells=n_cells, per_cell=PER_CELL, shape=shape, cfl=CFL,
                            comm=comm)
-    setup = _max(comm, time.perf_counter() - t0)
-    wall = timed_run(sim, ex.steps)
+    setup = common.gmax(comm, time.perf_counter() - t0)
+    wall, _ = common.timed_run(sim, ex.steps)
     err = errors(sim, ex)
     n = sim.particles.n_global
     m = dict(displacement_error=err["displacement"], stress_error=err["stress"], setup_s=setup,
@@ -206,7 +146,7 @@ def run_one(kind, scheme, shape, n_cells, comm):
                h=ex.h, dt=ex.dt, ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
                A=ex.A, E=ex.E, nu=ex.nu, density=ex.rho, t_end=ex.t_end,
                dt_rule=f"{CFL:g} h / c_p" if integ.explicit else "h / c_p")
-    rec = common.make_record(f"{series} n={n_cells}", cfg, n, _sum(comm, sim.grid.n_owned_cells),
+    rec = common.make_record(f"{series} n={n_cells}", cfg, n, common.gsum(comm, sim.grid.n_owned_cells),
                              ex.steps, wall, m)
     rec["series"] = series
     return rec
@@ -216,32 +156,17 @@ def run(quick=False, out="bench-results", comm=None, cells=None, series=None, ve
     """Run the case, write out/mms.json and the PNGs, print the tables; returns the result
     dict. cells overrides the cell counts per side, series the (integrator, scheme, shape)
     list."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
-    cells = tuple(CELLS["quick" if quick else "full"] if cells is None else cells)
-    if len(cells) < 2 or any(not (isinstance(n, (int, np.integer)) and n >= 2) for n in cells):
-        raise ValueError(f"{CASE}: 'cells' must be at least two integers >= 2, got {cells!r}")
+    comm = common.world(comm)
+    cells = common.check_cells(CASE, "cells", CELLS["quick" if quick else "full"] if cells is None else cells)
     series = series_list() if series is None else list(series)
     t_start = time.perf_counter()
-    runs, jit = [], {}
-    for kind, scheme, shape in series:
-        t0 = time.perf_counter()
-        run_one(kind, scheme, shape, 2, comm)          # warm-up: JIT / cache loading
-        jit[f"{kind} {scheme} {shape}"] = _max(comm, time.perf_counter() - t0)
-        for n in cells:
-            r = run_one(kind, scheme, shape, n, comm)
-            runs.append(r)
-            if verbose:
-                common.say(comm, f"[{CASE}] {r['name']}: {r['steps']} steps, {r['wall_s']:.3g} s, "
-                           f"errors u {r['metrics']['displacement_error']:.3e} "
-                           f"sigma {r['metrics']['stress_error']:.3e}")
+    runs, jit = common.sweep(series, lambda s: cells, run_one, comm, verbose and (
+        lambda r: f"[{CASE}] {r['name']}: {r['steps']} steps, {r['wall_s']:.3g} s, errors u "
+                  f"{r['metrics']['displacement_error']:.3e} sigma {r['metrics']['stress_error']:.3e}"))
     metrics = [m for m, _ in METRICS]
-    conv = convergence(runs, metrics)
+    conv = common.convergence(runs, metrics)
     doc = common.result(CASE, runs, comm, quick=quick, convergence=conv,
                         summary=summary(runs, conv, metrics), jit_s=jit,
-                        total_wall_s=_max(comm, time.perf_counter() - t_start))
-    common.write_result(doc, out, comm)
-    plot(doc, out, comm, CASE, METRICS)
-    if verbose:
-        print_summary(doc, comm, CASE, METRICS)
-    return doc
+                        total_wall_s=common.gmax(comm, time.perf_counter() - t_start))
+    return common.finish(doc, out, comm, lambda d, _, c: plot(d, out, c, CASE, METRICS),
+                         lambda d, c: print_summary(d, c, CASE, METRICS), verbose)

@@ -445,10 +445,8 @@ def plot(doc, path, comm):
             tgt = TARGETS["explicit_speedup_2_ranks"]
             ax.text(0.02, 0.98, f"target: speed-up >= {tgt:g} on 2 ranks", fontsize=7,
                     transform=ax.transAxes, va="top")
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm,
-                              title=f"fenicsmpm MPI scaling{quick} (launched by a serial runner)"
-                                    f"\n{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(
+        doc, "MPI scaling", " (launched by a serial runner)"))
 
 
 def print_report(doc, comm):
@@ -512,8 +510,7 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     Before each launch it waits (at most `max_wait` seconds: default 30, quick 0) until at
     most a quarter of the cores are busy with other work.
     Must run serially (RuntimeError under an MPI size > 1) with `mpirun` on PATH."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     if comm.size > 1:
         raise RuntimeError(REFUSAL)
     mpirun = shutil.which("mpirun")

@@ -62,20 +62,18 @@ def _mean_speed(sim, comm):
 
 
 def _gmin(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(float(x), op=MPI.MIN)
+    return common.gmin(comm, float(x))
 
 
 def _gmax(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(float(x), op=MPI.MAX)
+    return common.gmax(comm, float(x))
 
 
 def build_collapse(comm, integrator, h, dt):
     """L3 column; frictional base for explicit integrators, fixed base otherwise."""
     from dolfinx import mesh as dmesh
     import fenicsmpm as fm
-    from fenicsmpm.initial_stress import k0_stress
+    from fenicsmpm.materials.initial_stress import k0_stress
     c = COLLAPSE
     nx, ny = int(round(2 * c["span"] / h)), int(round((c["H"] + 2 * h) / h))
     msh = dmesh.create_rectangle(comm, [[-c["span"], 0.0], [c["span"], ny * h]], [nx, ny],
@@ -215,8 +213,7 @@ def run(quick=False, out="bench-results", comm=None, scenes=("collapse", "slope"
     """Run the case, write out/plasticity.json and out/plasticity.png, print the table.
     t_end overrides every scene's end time (a tiny run for tests)."""
     import os
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     size = SIZES["quick" if quick else "full"]
     runs, errors = [], []
     _warmup(comm)

@@ -3,13 +3,13 @@ answers, standard MPM against GIMP and CPDI.
 
     python -m fenicsmpm.bench self-weight [--quick]
 
-V2, large deformation (fenicsmpm.verification_column; BENCHMARKS.md V2, the AMPLE column):
+V2, large deformation (fenicsmpm.problems.column; BENCHMARKS.md V2, the AMPLE column):
   l0 = 50 m, one cell wide, 2 x 2 particles per cell, Hencky E = 1e4, nu = 0, rho0 = 80,
   g = 10 (top settles 25.94 m). Series:
     QuasiStatic mpm             40 load steps, Newton to rtol 1e-9 (AMPLE's set-up)
     DampedExplicit-MUSL SHAPE   every shape family; explicit MUSL, dt = 0.5 h / c_p, gravity
                                 ramped by the seed-002 sine over one first-mode period T and
-                                mass-proportional damping 2 w1 (verification_column), run to
+                                mass-proportional damping 2 w1 (problems.column), run to
                                 T / 2 + 16 / w1 (the static state)
   cells along the column n_y = 8, 16, 32, 64, 128 (quick: 4, 6, 8, 12).
   Metrics: stress_error (AMPLE's norm: sum_p |sigma_yy - sigma_a(Y_p)| V0_p / (rho0 g l0
@@ -34,7 +34,7 @@ import time
 import numpy as np
 
 from . import common
-from .mms import (_max, _sum, convergence, plot, print_summary, summary, timed_run, TARGETS)
+from .mms import plot, print_summary, summary, TARGETS
 
 CASE = "self-weight"
 SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2")
@@ -61,7 +61,7 @@ def series_list(quick=False):
 
 def run_one(problem, kind, shape, n_cells, comm):
     import fenicsmpm as fm
-    from ..verification_column import DampedExplicit, errors, large_deformation_column
+    from ..problems.column import DampedExplicit, errors, large_deformation_column
     if kind == "QuasiStatic":
         integ = fm.QuasiStatic(load_steps=LOAD_STEPS, rtol=1e-9)
     else:
@@ -73,12 +73,12 @@ def run_one(problem, kind, shape, n_cells, comm):
         mat = fm.LinearElastic(E=L1["E"], nu=L1["nu"], density=L1["density"])
         sim, ex = large_deformation_column(integ, n_cells=n_cells, shape=shape, cfl=CFL, comm=comm,
                                            material=mat, ramp=L1_RAMP, run_time=L1_RAMP, **L1)
-    setup = _max(comm, time.perf_counter() - t0)
-    wall = timed_run(sim, ex.steps)
+    setup = common.gmax(comm, time.perf_counter() - t0)
+    wall, _ = common.timed_run(sim, ex.steps)
     err = errors(sim, ex)
     n = sim.particles.n_global
     p = sim.particles
-    settle = -comm.allreduce(float(p.u[:, 1].min()) if len(p) else 0.0, op=_min_op())
+    settle = -common.gmin(comm, float(p.u[:, 1].min()) if len(p) else 0.0)
     m = dict(stress_error=err["stress"], setup_s=setup, top_settlement=settle,
              settlement_over_h=settle / ex.h, wall_per_particle_step_s=wall / (n * ex.steps))
     if problem == "V2":
@@ -98,15 +98,10 @@ def run_one(problem, kind, shape, n_cells, comm):
                    dt_rule=f"{CFL:g} h / c_p")
     else:
         cfg.update(load_steps=LOAD_STEPS, newton_rtol=1e-9)
-    rec = common.make_record(f"{series} n={n_cells}", cfg, n, _sum(comm, sim.grid.n_owned_cells),
+    rec = common.make_record(f"{series} n={n_cells}", cfg, n, common.gsum(comm, sim.grid.n_owned_cells),
                              ex.steps, wall, m)
     rec.update(series=series, problem=problem)
     return rec
-
-
-def _min_op():
-    from mpi4py import MPI
-    return MPI.MIN
 
 
 def run(quick=False, out="bench-results", comm=None, v2_cells=None, l1_cells=None, series=None,
@@ -114,30 +109,18 @@ def run(quick=False, out="bench-results", comm=None, v2_cells=None, l1_cells=Non
     """Run the case, write out/self-weight.json and the PNGs, print the tables; returns the
     result dict. v2_cells / l1_cells override the cell counts, series the (problem,
     integrator, shape) list."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     mode = "quick" if quick else "full"
-    cells = {"V2": tuple(V2_CELLS[mode] if v2_cells is None else v2_cells),
-             "L1": tuple(L1_CELLS[mode] if l1_cells is None else l1_cells)}
-    for k, c in cells.items():
-        if len(c) < 2 or any(not (isinstance(n, (int, np.integer)) and n >= 2) for n in c):
-            raise ValueError(f"{CASE}: {k} cells must be at least two integers >= 2, got {c!r}")
+    cells = {"V2": common.check_cells(CASE, "V2 cells", V2_CELLS[mode] if v2_cells is None else v2_cells),
+             "L1": common.check_cells(CASE, "L1 cells", L1_CELLS[mode] if l1_cells is None else l1_cells)}
     series = series_list(quick) if series is None else list(series)
     t_start = time.perf_counter()
-    runs, jit = [], {}
-    for problem, kind, shape in series:
-        t0 = time.perf_counter()
-        run_one(problem, kind, shape, 2, comm)        # warm-up: JIT / cache loading
-        jit[f"{problem} {kind} {shape}"] = _max(comm, time.perf_counter() - t0)
-        for n in cells[problem]:
-            r = run_one(problem, kind, shape, n, comm)
-            runs.append(r)
-            if verbose:
-                common.say(comm, f"[{CASE}] {r['name']}: {r['steps']} steps, {r['wall_s']:.3g} s, "
-                           f"stress error {r['metrics']['stress_error']:.3e}")
+    runs, jit = common.sweep(series, lambda s: cells[s[0]], run_one, comm, verbose and (
+        lambda r: f"[{CASE}] {r['name']}: {r['steps']} steps, {r['wall_s']:.3g} s, "
+                  f"stress error {r['metrics']['stress_error']:.3e}"))
     v2 = [r for r in runs if r["problem"] == "V2"]
     l1 = [r for r in runs if r["problem"] == "L1"]
-    conv = convergence(v2, [m for m, _ in METRICS_V2]) + convergence(l1, ["stress_error"])
+    conv = common.convergence(v2, [m for m, _ in METRICS_V2]) + common.convergence(l1, ["stress_error"])
     summ = summary(v2, [c for c in conv if c["series"].startswith("V2")], [m for m, _ in METRICS_V2])
     s1 = summary(l1, [c for c in conv if c["series"].startswith("L1")], ["stress_error"])
     summ["orders"] += s1["orders"]
@@ -153,7 +136,7 @@ def run(quick=False, out="bench-results", comm=None, v2_cells=None, l1_cells=Non
                         reached_under_2s=bool(best is not None and best["wall_s"] < 2.0))
     doc = common.result(CASE, runs, comm, quick=quick, convergence=conv, summary=summ,
                         jit_s=jit, ample={"GIMP": AMPLE_GIMP}, ample_target=ample_target,
-                        targets=list(TARGETS), total_wall_s=_max(comm, time.perf_counter() - t_start))
+                        targets=list(TARGETS), total_wall_s=common.gmax(comm, time.perf_counter() - t_start))
     common.write_result(doc, out, comm)
     sv2 = list(dict.fromkeys(r["series"] for r in v2))
     sl1 = list(dict.fromkeys(r["series"] for r in l1))

@@ -57,8 +57,7 @@ def run(quick=False, out="bench-results", comm=None, n=None, steps=None, repeats
         shapes=SHAPES, verbose=True):
     """Run the case, write out/shape-cost.json and shape-cost.png, print a table; returns the
     result dict."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     size = dict(SIZES["quick" if quick else "full"])
     for k, v in (("n", n), ("steps", steps), ("repeats", repeats)):
         if v is not None:
@@ -122,6 +121,5 @@ def _plot(doc, out, comm):
     common.stacked_bars(axes[0, 0], [r["name"] for r in runs], stacks,
                         annotations=[f"{r['metrics']['ratio_to_mpm']:.2f}x" for r in runs],
                         ylabel="microseconds per particle-step")
-    quick = " (quick)" if doc.get("quick") else ""
     return common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,
-                              title=f"fenicsmpm {CASE}{quick}\n{common.machine_title(doc['machine'])}")
+                              title=common.figure_title(doc, CASE))

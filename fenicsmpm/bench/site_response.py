@@ -1,8 +1,8 @@
-"""Benchmark case `site-response`: P1 (BENCHMARKS.md section P; fenicsmpm.site_response).
+"""Benchmark case `site-response`: P1 (BENCHMARKS.md section P; fenicsmpm.problems.soil_column).
 
 The 10 m column (E = 1e4 kPa, nu = 0.33, 18.5 kN/m^3: V_s = 44.65 m/s), one cell wide with
 periodic sides, 2x2 particles per cell, on a rigid base shaken by the Gabor wavelet at f0
-(site_response.gabor), gravity switched on at t = 0 on the stress-free column (the source of
+(soil_column.gabor), gravity switched on at t = 0 on the stress-free column (the source of
 vertical noise). Schemes: symplectic Euler (fm.Explicit(), MUSL), explicit generalized-alpha
 rho_b = 0.5 and 0.8 (dt = "auto", cfl 0.5), implicit Newmark (beta = 1/4, gamma = 1/2) and
 implicit generalized-alpha rho_inf = 0.8 at dt = h / c_p (Courant 1). Cell sizes 0.5 and
@@ -22,7 +22,7 @@ import time
 import numpy as np
 
 from . import common
-from .. import site_response as sr
+from ..problems import soil_column as sr
 
 CASE = "site-response"
 
@@ -41,13 +41,12 @@ def _schemes(quick, h):
 
 
 def run_one(name, cls, make, extra, h, t_end, comm):
-    from mpi4py import MPI
     warm, _ = sr.soil_column(make(), h=h, gravity="sudden", t_end=t_end, comm=comm)
     warm.run(steps=2, progress=False)
     sim, info = sr.soil_column(make(), h=h, gravity="sudden", t_end=t_end, comm=comm)
     t0 = time.perf_counter()
     sim.run(t_end=t_end, progress=False)
-    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    wall = common.gmax(comm, time.perf_counter() - t0)
     hist = sr.column_histories(sim, info)
     peaks, err, (f, ratio) = sr.transfer_peaks(hist)
     t = hist["t"]
@@ -91,8 +90,7 @@ def plot(doc, curves, path, comm):
 def run(quick=False, out="bench-results", comm=None, verbose=True, t_end=None):
     """Run the case, write out/site-response.json and out/site-response.png, print the
     table. t_end overrides the record length (a tiny run for tests)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     sizes = (0.5, 0.25) if quick else (0.5, 0.25, 0.125)
     t_end = t_end or (12.0 if quick else 20.0)
     runs, curves = [], []

@@ -6,7 +6,7 @@ The short versions of the same scenarios are the tests in tests/stress/, which c
 scenario functions of this module with small sizes. Every scenario is collective (MPI).
 
 Scenarios (full size / --quick):
-  bar-explicit    V1 vibrating bar (fenicsmpm.verification.vibrating_bar: 20 cells, 2x2 ppc,
+  bar-explicit    V1 vibrating bar (fenicsmpm.problems.elastic.vibrating_bar: 20 cells, 2x2 ppc,
                   L = 1, E = 100, rho = 1, v0 = 0.1, period T = 0.4 s), explicit MUSL at
                   dt = "auto" (cfl 0.5), 10^4 steps (125 periods) / 2000 steps.
   bar-newmark     the same bar, implicit Newmark at dt = 5 h / c, 10^3 steps (62.5 periods)
@@ -35,7 +35,7 @@ Scenarios (full size / --quick):
                   pushed to rho g H / E = COLLAPSE_OVERLOAD and COLLAPSE_INVERSION, to find
                   where standard MPM stops (it must stop with a guard's RuntimeError naming
                   the particles, never NaN). 40 / 10 cell rows.
-  impact          colliding discs (verification.colliding_discs, BENCHMARKS L2) at 10x the
+  impact          colliding discs (problems.elastic.colliding_discs, BENCHMARKS L2) at 10x the
                   speed (|v| = 1.41 m/s per disc, closing speed 2.8 m/s, 2.4 c_p), explicit
                   MUSL, USF and USL, to t = 0.6 s (impact at 0.16 s, rebound; later the discs
                   leave the unit square); and the same discs made of neo-Hookean material
@@ -81,34 +81,19 @@ IMPACT_SCHEMES = ("MUSL", "USF", "USL")
 
 
 # ---------------------------------------------------------------------------- helpers
-def _comm(comm):
-    from mpi4py import MPI
-    return MPI.COMM_WORLD if comm is None else comm
-
-
-def _max(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
-
-
-def _min(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MIN) if comm.size > 1 else x
-
-
 def state_finite(sim):
     """True when every particle position, velocity, stress, F and volume is finite on every
     rank (collective)."""
     p = sim.particles
     ok = bool(all(np.all(np.isfinite(a)) for a in (p.x, p.v, p.stress, p.F, p.V)))
-    return bool(_min(sim.comm, int(ok)))
+    return bool(common.gmin(sim.comm, int(ok)))
 
 
 def min_det_F(sim):
     """Smallest det F over all particles (collective)."""
     p = sim.particles
     local = float(np.min(np.linalg.det(p.F))) if len(p) else math.inf
-    return _min(sim.comm, local)
+    return common.gmin(sim.comm, local)
 
 
 def total_energy(sim):
@@ -121,11 +106,6 @@ def _outcome(err):
     if err is None:
         return "completed"
     return f"{type(err).__name__}: {str(err).splitlines()[0] if str(err) else ''}"
-
-
-def _global_cells(sim):
-    n = sim.grid.n_owned_cells
-    return sim.comm.allreduce(n) if sim.comm.size > 1 else n
 
 
 def _config(sim, **extra):
@@ -149,8 +129,8 @@ def bar_dt_critical(n_cells=20, comm=None):
     """The explicit critical step h / c_p of the V1 bar on n_cells cells (as Simulation
     computes it from the grid)."""
     import fenicsmpm as fm
-    from ..verification import vibrating_bar
-    sim, _ = vibrating_bar(fm.Explicit("MUSL"), n_cells=n_cells, cfl=0.5, comm=_comm(comm))
+    from ..problems.elastic import vibrating_bar
+    sim, _ = vibrating_bar(fm.Explicit("MUSL"), n_cells=n_cells, cfl=0.5, comm=common.world(comm))
     return sim.dt_critical
 
 
@@ -162,8 +142,8 @@ def bar_energy(integrator, steps, dt=None, dt_factor=None, n_cells=20, comm=None
     then set sim.dt = force_dt * dt_critical (bypasses the explicit refusal on purpose).
     A guard's exception stops the run and is returned as `error` (the energy series ends
     there). Returns a dict with the series (E relative to E0, t in periods) and metrics."""
-    from ..verification import vibrating_bar
-    comm = _comm(comm)
+    from ..problems.elastic import vibrating_bar
+    comm = common.world(comm)
     if dt_factor is not None:
         dt = dt_factor * bar_dt_critical(n_cells, comm)
     sim, exact = vibrating_bar(integrator, n_cells=n_cells, dt=dt, cfl=0.5, comm=comm)
@@ -178,7 +158,7 @@ def bar_energy(integrator, steps, dt=None, dt_factor=None, n_cells=20, comm=None
             E.append(total_energy(sim))
     except (RuntimeError, FloatingPointError) as e:     # guards: raised on every rank
         err = e
-    wall = _max(comm, time.perf_counter() - t0)
+    wall = common.gmax(comm, time.perf_counter() - t0)
     E = np.asarray(E) / E0
     T = exact["period"]
     t = sim.dt * np.arange(len(E))
@@ -207,7 +187,7 @@ def _bar_record(name, r, **extra):
     sim = r["sim"]
     cfg = _config(sim, problem="V1 vibrating bar", cells_along=round(1.0 / r["exact"]["h"]),
                   courant=sim.dt * r["exact"]["wave_speed"] / r["exact"]["h"], **extra)
-    rec = common.make_record(name, cfg, sim.particles.n_global, _global_cells(sim),
+    rec = common.make_record(name, cfg, sim.particles.n_global, common.global_cells(sim),
                              max(r["steps"], 1), max(r["wall_s"], 1e-9), r["metrics"])
     rec["outcome"] = r["outcome"]
     return rec
@@ -218,8 +198,8 @@ def dt_sweep(factors=SWEEP_FACTORS, steps=500, n_cells=20, comm=None, force=True
     refusal message, and for accepted factors the energy metrics of `steps` steps; for
     refused ones (force=True) the outcome of the forced run."""
     import fenicsmpm as fm
-    from ..verification import vibrating_bar
-    comm = _comm(comm)
+    from ..problems.elastic import vibrating_bar
+    comm = common.world(comm)
     dt_crit = bar_dt_critical(n_cells, comm)
     rows = []
     for f in factors:
@@ -248,7 +228,7 @@ def dt_sweep(factors=SWEEP_FACTORS, steps=500, n_cells=20, comm=None, force=True
 def courant_sweep(courants=COURANTS, steps=200, n_cells=20, comm=None):
     """Implicit Newmark bar at dt = C h / c. Returns rows with the energy metrics."""
     import fenicsmpm as fm
-    comm = _comm(comm)
+    comm = common.world(comm)
     rows = []
     for c in courants:
         r = bar_energy(fm.Newmark(), steps, dt_factor=c, n_cells=n_cells, comm=comm)
@@ -276,7 +256,7 @@ def collapse(n_rows=10, load=COLLAPSE_LOAD, comm=None, ramp_transits=None, hold_
     run and is returned in `error`. Returns a dict (series, metrics, sim)."""
     import fenicsmpm as fm
     from dolfinx import mesh as dmesh
-    comm = _comm(comm)
+    comm = common.world(comm)
     P = dict(COLLAPSE)
     if ramp_transits is not None:
         P["ramp_transits"] = ramp_transits
@@ -318,7 +298,7 @@ def collapse(n_rows=10, load=COLLAPSE_LOAD, comm=None, ramp_transits=None, hold_
                 finite = finite and state_finite(sim)
     except (RuntimeError, FloatingPointError) as e:
         err = e
-    wall = _max(comm, time.perf_counter() - t0)
+    wall = common.gmax(comm, time.perf_counter() - t0)
     finite_end = state_finite(sim)
     comp, detF = np.asarray(comp), np.asarray(detF)
     m = dict(compaction_max=float(np.max(comp)), compaction_end=float(comp[-1]),
@@ -333,12 +313,12 @@ def collapse(n_rows=10, load=COLLAPSE_LOAD, comm=None, ramp_transits=None, hold_
 
 # ---------------------------------------------------------------------------- impact
 def discs(material, integrator, n_cells=20, per_cell=2, speed=0.1, comm=None):
-    """The L2 geometry of verification.colliding_discs (discs of radius 0.2 centred at
+    """The L2 geometry of problems.elastic.colliding_discs (discs of radius 0.2 centred at
     (0.2, 0.2) and (0.8, 0.8), velocities +-(speed, speed), unit square, dt = "auto" at
     cfl 0.5) with another material, built through the public API."""
     import fenicsmpm as fm
     from dolfinx import mesh as dmesh
-    comm = _comm(comm)
+    comm = common.world(comm)
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells],
                                  dmesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
@@ -362,8 +342,8 @@ def impact(scheme="MUSL", n_cells=20, speed_factor=IMPACT_SPEED_FACTOR, t_end=IM
     (|sum m v| / sum m |v|_0), min det F, energies and state finiteness (collective).
     A guard's exception stops the run and is returned in `error`."""
     import fenicsmpm as fm
-    from ..verification import colliding_discs
-    comm = _comm(comm)
+    from ..problems.elastic import colliding_discs
+    comm = common.world(comm)
     speed = 0.1 * speed_factor
     if material is None:
         sim, exact = colliding_discs(fm.Explicit(scheme), n_cells=n_cells, speed=speed, comm=comm)
@@ -391,7 +371,7 @@ def impact(scheme="MUSL", n_cells=20, speed_factor=IMPACT_SPEED_FACTOR, t_end=IM
             finite = finite and state_finite(sim)
     except (RuntimeError, FloatingPointError) as e:
         err = e
-    wall = _max(comm, time.perf_counter() - t0)
+    wall = common.gmax(comm, time.perf_counter() - t0)
     finite_end = state_finite(sim)
     K0 = ek[0]
     m = dict(momentum_error=float(np.max(mom)), min_det_F=float(np.min(detF)),
@@ -465,9 +445,7 @@ def plot(doc, series, path, comm):
                  f"{max(r['metrics']['momentum_error'] for r in doc['impact']):.1e}", fontsize=9)
     ax.legend(fontsize=6)
     ax.grid(True, lw=0.3, alpha=0.5)
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm, title=f"fenicsmpm stability{quick}\n"
-                              f"{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(doc, "stability"))
 
 
 def print_report(doc, comm):
@@ -479,8 +457,7 @@ def print_report(doc, comm):
                              ("max |E-E0|/E0", lambda r: r["metrics"]["max_energy_error"]),
                              ("E_end/E0", lambda r: r["metrics"]["energy_end"]),
                              ("wall [s]", "wall_s")], comm,
-                       title=f"\n== {CASE}{' (quick)' if doc['quick'] else ''}: "
-                             f"{doc['machine']['ranks']} rank(s)\nV1 bar, long runs "
+                       title=common.table_title(doc) + "\nV1 bar, long runs "
                              f"(drift: mean E over the last period - over the first, / E0)")
     common.print_table(doc["dt_sweep"], [
         ("dt/dt_crit", "factor"), ("accepted", lambda r: "yes" if r["accepted"] else "REFUSED"),
@@ -513,7 +490,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, **sizes):
     `sizes` override SIZES[quick or full] (explicit_steps, implicit_steps, sweep_steps,
     courant_steps, collapse_rows, impact_cells). Returns the result dict (every rank)."""
     import fenicsmpm as fm
-    comm = _comm(comm)
+    comm = common.world(comm)
     S = dict(SIZES["quick" if quick else "full"])
     unknown = set(sizes) - set(S)
     if unknown:
@@ -548,7 +525,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, **sizes):
         cfg = _config(r["sim"], problem="neo-Hookean block collapse", rows=S["collapse_rows"],
                       **{k: v for k, v in COLLAPSE.items()})
         rec = common.make_record(name, cfg, r["sim"].particles.n_global,
-                                 _global_cells(r["sim"]), max(r["steps"], 1),
+                                 common.global_cells(r["sim"]), max(r["steps"], 1),
                                  max(r["wall_s"], 1e-9), r["metrics"])
         rec["outcome"] = r["outcome"]
         runs.append(rec)
@@ -569,7 +546,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, **sizes):
                       material=type(mat).__name__ if mat is not None else "LinearElastic",
                       t_end=IMPACT_T_END, cells_per_side=S["impact_cells"])
         rec = common.make_record(name, cfg, r["sim"].particles.n_global,
-                                 _global_cells(r["sim"]), max(r["steps"], 1),
+                                 common.global_cells(r["sim"]), max(r["steps"], 1),
                                  max(r["wall_s"], 1e-9), r["metrics"])
         rec["outcome"] = r["outcome"]
         runs.append(rec)

@@ -18,7 +18,7 @@ brackets):
                     the material boundary; seed 003 after Jassim 2013)     [force integration]
 
 Problems and error measures (the `error` metric of each run):
-  V2      the AMPLE large-deformation Hencky column (fenicsmpm.verification_column) relaxed
+  V2      the AMPLE large-deformation Hencky column (fenicsmpm.problems.column) relaxed
           by damped explicit dynamics (DampedExplicit, damping 2 w1, sine gravity ramp over
           T, run to T/2 + 16/w1; generalized-alpha gets the same velocity damping in
           _DampedGeneralizedAlpha). error: the AMPLE stress norm
@@ -28,11 +28,11 @@ Problems and error measures (the `error` metric of each run):
           is not their reference position; this measure treats every configuration alike).
           AMPLE's own norm (Y = x - u) is kept as metric stress_error_ample.
           n_y = 32 cells (quick 6).
-  discs   the colliding discs (BENCHMARKS L2, fenicsmpm.verification.colliding_discs,
+  discs   the colliding discs (BENCHMARKS L2, fenicsmpm.problems.elastic.colliding_discs,
           cfl 0.2, to t = 3.5 s, through the impact at 1.59 s). error: |E(3.5) / E(0) - 1| of
           the total energy E = kinetic + strain; max_energy_error the largest over samples
           every 10 steps. 20 x 20 cells (quick 10 x 10).
-  W1      the 100 m column on a viscous (Lysmer) base (fenicsmpm.absorbing_column), dt =
+  W1      the 100 m column on a viscous (Lysmer) base (fenicsmpm.problems.absorbing_column), dt =
           "auto" at cfl 0.5 (0.5 x the integrator's critical step: Courant 0.5 for Explicit,
           scaled by Omega_s(rho_b) / 2 for generalized-alpha), to 1.4 s. error: the reflection ratio at 50 m depth. dx = 0.5 m (quick 1 m).
   L1      the soft column (E = 5 MPa, rho = 6000, nu = 0, H = 10 m, LinearElastic), damped
@@ -125,7 +125,7 @@ def family_options(cfgs):
 def applicable(problem, cfg):
     """None when the configuration runs on the problem, else the reason it does not."""
     if problem == "W1" and cfg["shape"] != "mpm":
-        return ("the W1 builder (fenicsmpm.absorbing_column) takes no shape argument: "
+        return ("the W1 builder (fenicsmpm.problems.absorbing_column) takes no shape argument: "
                 "wide shapes were not run on W1")
     return None
 
@@ -151,7 +151,7 @@ def _damped_ga(rho_b):
 
 def _integrator(cfg, damped):
     import fenicsmpm as fm
-    from ..verification_column import DampedExplicit
+    from ..problems.column import DampedExplicit
     if cfg["scheme"] == "GA":
         if damped:     # damping set in build (large_deformation_column sets DampedExplicit's)
             return _damped_ga(cfg["rho_b"])
@@ -162,7 +162,7 @@ def _integrator(cfg, damped):
 def build(problem, cfg, size, comm):
     """(sim, exact, steps) of one problem for one configuration."""
     import fenicsmpm as fm
-    from ..verification_column import explicit_time, large_deformation_column
+    from ..problems.column import explicit_time, large_deformation_column
     damped = problem in ("V2", "L1")
     integ = _integrator(cfg, damped)
     if problem in ("V2", "L1"):
@@ -179,7 +179,7 @@ def build(problem, cfg, size, comm):
         steps = ex.steps
     elif problem == "discs":
         from ..grid import vertex_ghost_partitioner
-        from ..verification import colliding_discs
+        from ..problems.elastic import colliding_discs
         part = vertex_ghost_partitioner() if cfg["shape"] != "mpm" else None
         sim0, ex = colliding_discs(integ, n_cells=int(size), cfl=DISCS_CFL, comm=comm,
                                    partitioner=part)
@@ -189,7 +189,7 @@ def build(problem, cfg, size, comm):
         ex["h"] = sim.grid.h
         steps = int(math.ceil(DISCS_T / sim.dt - 1e-9))
     elif problem == "W1":
-        from ..absorbing_column import absorbing_column
+        from ..problems.absorbing_column import absorbing_column
         sim, ex = absorbing_column(integ, base="viscous", dx=float(size), cfl=0.5, comm=comm,
                                    depths=(50.0, 100.0))
         ex["h"] = float(size)
@@ -223,14 +223,9 @@ def v2_current_stress_error(sim, ex):
     return float(tot[0] / (ex.rho * ex.g * ex.l0 * tot[1]))
 
 
-def _max(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
-
-
 def run_one(problem, cfg, size, comm, sample_every=10):
     """Run one (problem, configuration); returns (record dict)."""
-    from ..verification_column import errors
+    from ..problems.column import errors
     sim, ex, steps = build(problem, cfg, size, comm)
     metrics, failure, wall, done = {}, None, 0.0, 0
     e0 = _total_energy(sim) if problem == "discs" else None
@@ -245,7 +240,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
                 energy_err.append(_total_energy(sim) / e0 - 1.0)
     except Exception as exc:                 # recorded, not raised: a failing technique is data
         failure = f"{type(exc).__name__}: {exc}"
-    wall = _max(comm, wall)
+    wall = common.gmax(comm, wall)
     n = sim.particles.n_global
     if failure is None:
         if problem == "V2":
@@ -260,7 +255,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
             metrics.update(energy_change=e_end,
                            max_energy_error=max([abs(e) for e in energy_err] + [abs(e_end)]))
         else:
-            from ..absorbing_column import summary
+            from ..problems.absorbing_column import summary
             s = summary(sim, ex, depth=50.0)
             err = s["reflection"]
             metrics.update(peak_stress_error=s["peak_stress_error"],
@@ -294,7 +289,7 @@ def warm_up(problem, cfg, comm):
     for _ in range(WARM_STEPS):
         sim.step()
     sim.energy()
-    return _max(comm, time.perf_counter() - t0)
+    return common.gmax(comm, time.perf_counter() - t0)
 
 
 # ---------------------------------------------------------------------------- analysis
@@ -480,10 +475,8 @@ def plot(doc, path, comm):
     for fam, col in COLORS.items():
         axes[0, 0].plot([], [], "s" if fam == "baseline" else "o", color=col, label=fam)
     axes[0, 0].legend(fontsize=6, loc="center right")
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm,
-                              title=f"fenicsmpm techniques{quick}: error against run time\n"
-                                    f"{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(
+        doc, "techniques", ": error against run time"))
 
 
 def print_report(doc, comm):
@@ -492,8 +485,7 @@ def print_report(doc, comm):
             ("error x time", lambda r: r["metrics"].get("error_x_time")),
             ("splits", lambda r: r["metrics"].get("splits")),
             ("failed", lambda r: r["config"].get("failure", "")[:40] or None)]
-    common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
-                       f"{' (quick)' if doc['quick'] else ''}: {doc['machine']['ranks']} rank(s)")
+    common.print_table(doc["runs"], cols, comm, title=common.table_title(doc))
     common.say(comm, "\n" + readme_block(doc))
 
 
@@ -503,8 +495,7 @@ def run(quick=False, out="bench-results", comm=None, problems=PROBLEMS, sizes=No
     returns the result dict. sizes: {problem: size} overrides; configs: names to run;
     repeats: runs per configuration, the fastest kept (default 1 quick, 2 full; the errors
     are deterministic, only the wall time varies on a shared machine)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     mode = "quick" if quick else "full"
     reps = (1 if quick else 2) if repeats is None else int(repeats)
     size = dict(SIZES[mode], **(sizes or {}))
@@ -540,7 +531,7 @@ def run(quick=False, out="bench-results", comm=None, problems=PROBLEMS, sizes=No
                         error_measures={p: ERROR_NAMES[p] for p in problems},
                         families=fam, baseline=BASELINE, not_applicable=na, jit_s=jit,
                         repeats=reps,
-                        total_wall_s=_max(comm, time.perf_counter() - t_start))
+                        total_wall_s=common.gmax(comm, time.perf_counter() - t_start))
     doc["recommendation"] = common._clean(recommend(doc))
     common.write_result(doc, out, comm)
     plot(doc, os.path.join(out, f"{CASE}.png"), comm)

@@ -106,10 +106,9 @@ def scene_config(spec):
 
 def build_scene(cfg, comm=None):
     """The Simulation of a config (collective)."""
-    from mpi4py import MPI
     from dolfinx import mesh as dmesh
     import fenicsmpm as fm
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     n = cfg["grid_cells"][0]
     L, h = cfg["length"], cfg["length"] / n
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [L, L]], [n, n],
@@ -135,15 +134,9 @@ def build_scene(cfg, comm=None):
     return sim
 
 
-def _global_cells(sim):
-    g = sim.grid
-    return g.comm.allreduce(g.n_owned_cells) if g.comm.size > 1 else g.n_owned_cells
-
-
 def run_scene(spec, comm=None):
     """Build, warm up, time; returns the run record."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     cfg = scene_config(spec)
     mem = common.MemoryProbe(comm).start()
     sim = build_scene(cfg, comm)
@@ -182,7 +175,7 @@ def run_scene(spec, comm=None):
     m["peak_rss_bytes"] = peak
     m["mem_bytes_per_particle"] = increase / n_part
     m["particle_array_bytes_per_particle"] = common.particle_bytes(sim) / n_part
-    rec = common.make_record(spec["name"], cfg, n_part, _global_cells(sim), steps, wall, m)
+    rec = common.make_record(spec["name"], cfg, n_part, common.global_cells(sim), steps, wall, m)
     if implicit:
         sim.integrator.system.destroy()
     del sim
@@ -227,10 +220,7 @@ def plot(doc, path, comm):
     axes[0, 1].text(-0.45, tgt, "explicit target: 5 M upd/s (200 ns)", fontsize=7,
                     ha="left", va="bottom")
     axes[0, 1].set_title("per particle (comparable across sizes)", fontsize=9)
-    quick = " (quick)" if doc.get("quick") else ""
-    return common.save_figure(fig, path, comm,
-                              title=f"fenicsmpm throughput{quick}\n"
-                                    f"{common.machine_title(doc['machine'])}")
+    return common.save_figure(fig, path, comm, title=common.figure_title(doc, "throughput"))
 
 
 def print_report(doc, comm):
@@ -242,8 +232,7 @@ def print_report(doc, comm):
             ("assembly/ksp", lambda r: r["metrics"].get("assembly_over_ksp")),
             ("newton its", lambda r: r["metrics"].get("newton_iterations")),
             ("B/particle", lambda r: r["metrics"]["mem_bytes_per_particle"])]
-    common.print_table(doc["runs"], cols, comm, title=f"\n== {CASE}"
-                       f"{' (quick)' if doc['quick'] else ''}: {doc['machine']['ranks']} rank(s)")
+    common.print_table(doc["runs"], cols, comm, title=common.table_title(doc))
     stage_cols = [("run", "name")] + [
         (k, (lambda k: lambda r: r["metrics"].get(f"frac_{k}"))(k))
         for k in list(STAGES) + list(SUBSTAGES) + ["other"]]
@@ -266,8 +255,7 @@ def print_report(doc, comm):
 def run(quick=False, out="bench-results", comm=None, scale=1.0, verbose=True):
     """Run the case, write out/throughput.json and out/throughput.png, print the table.
     Returns the result dict (on every rank)."""
-    from mpi4py import MPI
-    comm = MPI.COMM_WORLD if comm is None else comm
+    comm = common.world(comm)
     runs = []
     for spec in scenes(quick, scale):
         if verbose:

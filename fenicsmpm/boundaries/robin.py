@@ -25,7 +25,7 @@ from dolfinx import fem, mesh as dmesh
 import dolfinx.fem.petsc
 from petsc4py import PETSc
 
-from ..axisymmetric import radius_weight
+from ..kernels.axisymmetric import radius_weight
 
 SPRINGS = ("deeks-randolph", "kellezi", "virtual-layer")
 

@@ -8,7 +8,7 @@ import ufl
 from dolfinx import fem, mesh as dmesh
 from petsc4py import PETSc
 
-from ..axisymmetric import radius_weight
+from ..kernels.axisymmetric import radius_weight
 
 
 class Traction:

@@ -19,7 +19,7 @@ increments for the implicit integrators (seed 000 §2.7-2.9, eqs 2.50-2.58; BENC
   for a uniform material, while a cell only partly covered by material gets the covered
   fraction of it (no stiffness from empty space, which a normalised average would add).
 - Stress increments (eq 2.58): dF_p = I + sum_i du_i (x) grad N^CMPM_i(x_p) over the extended
-  stencil (kernels.cmpm), trimmed at the mesh boundary and at cells without particles;
+  stencil (shapes.cmpm), trimmed at the mesh boundary and at cells without particles;
   positions, velocities and accelerations are still mapped with GIMP.
 
 The tangent is not the derivative of the residual (GIMP test functions, CMPM strains), so
@@ -29,20 +29,19 @@ empty cell) has almost no mass and a stiffness the tangent misrepresents, and th
 stalls there (V1 bar, Newmark at dt = 5 h/c: no convergence in 100 iterations with the
 default mass_tolerance 1e-9); Simulation(mass_tolerance=1e-2) leaves such nodes inactive
 (V1 bar: at most 11 iterations per step). Particles crossing cells at large strain make it
-worse: the AMPLE column (verification_column, uGIMP, 16 cells, 40 load steps,
+worse: the AMPLE column (problems.column, uGIMP, 16 cells, 40 load steps,
 mass_tolerance 1e-2) stalls at load step 8 with |R|/|f| ~ 1e-2 after 60 iterations, where
 fm.QuasiStatic needs at most 4."""
 import time
 
 import numpy as np
-from mpi4py import MPI
 from numba import njit
 
 from ..kernels import transfer as kt
-from ..kernels.cmpm import CompositeBasis
+from ..shapes.cmpm import CompositeBasis
 from .implicit import Newmark, QuasiStatic
 
-__all__ = ["DoubleMappingQuasiStatic", "DoubleMappingNewmark", "self_weight_errors"]
+__all__ = ["DoubleMappingQuasiStatic", "DoubleMappingNewmark"]
 
 
 @njit(cache=True)
@@ -225,55 +224,3 @@ class DoubleMappingQuasiStatic(_DoubleMapping, QuasiStatic):
 
 class DoubleMappingNewmark(_DoubleMapping, Newmark):
     """fm.Newmark with DM-GC (module docstring); same requirements as DoubleMappingQuasiStatic."""
-
-
-def self_weight_errors(method="dmgc", shape="ugimp", n_cells=10, per_cell=2, load_steps=5,
-                       height=10.0, E=1e8, nu=0.0, density=2000.0, g=10.0, comm=MPI.COMM_WORLD,
-                       **newton):
-    """V2 small strain (BENCHMARKS.md): the elastic column under self-weight of
-    fenicsmpm.verification.self_weight_column (one cell wide, one empty cell row on top,
-    rollers on the sides and base, LinearElastic, gravity ramped over `load_steps`
-    quasi-static steps), on a vertex-ghost partitioned mesh with GIMP `shape`, solved with
-    DoubleMappingQuasiStatic (method="dmgc") or fm.QuasiStatic ("standard"). Collective.
-
-    Returns dict(stress, displacement, settlement, wall, newton):
-      stress        sum_p |sigma_yy,p - sigma_a(Y_p)| V0_p / (rho g H sum_p V0_p),
-      displacement  sqrt(sum_p V0_p (u_y,p - u_a(Y_p))^2 / sum_p V0_p u_a(Y_p)^2),
-      settlement    |mean u_y of the top particles / u_a(Y_top) - 1|,
-      wall          seconds of sim.run (largest over ranks),  newton: iterations per step,
-    with sigma_a = -rho g (H - Y), u_a = -rho g (H Y - Y^2 / 2) / M at the initial height Y."""
-    from dolfinx import mesh as dmesh
-    from ..grid import Grid, vertex_ghost_partitioner
-    from ..materials import LinearElastic
-    from ..particles import Particles
-    from ..simulation import Simulation
-    if method not in ("dmgc", "standard"):
-        raise ValueError(f"self_weight_errors: 'method' must be 'dmgc' or 'standard', got {method!r}")
-    h = height / n_cells
-    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [h, height + h]], [1, n_cells + 1],
-                                 dmesh.CellType.quadrilateral, partitioner=vertex_ghost_partitioner())
-    grid = Grid(msh)
-    mat = LinearElastic(E=E, nu=nu, density=density)
-    pts = Particles.fill(grid, mat, per_cell=per_cell, region=lambda x: x[:, 1] < height)
-    integ = (DoubleMappingQuasiStatic if method == "dmgc" else QuasiStatic)(load_steps=load_steps, **newton)
-    sim = Simulation(grid, pts, integ, dt=1.0, gravity=(0.0, -g), shape=shape)
-    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], h), [0])
-    sim.fix(lambda x: np.isclose(x[:, 1], 0.0), [1])
-    comm.barrier()
-    t0 = time.perf_counter()
-    sim.run(steps=load_steps, progress=False)
-    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
-    p = sim.particles
-    Y = (p.x - p.u)[:, 1]
-    M = mat.constrained_modulus
-    ua = -density * g * (height * Y - 0.5 * Y ** 2) / M
-    ytop = comm.allreduce(float(Y.max()) if len(Y) else -np.inf, op=MPI.MAX)
-    top = np.abs(Y - ytop) < 1e-9 * height
-    loc = np.array([np.sum(np.abs(p.stress[:, 1, 1] + density * g * (height - Y)) * p.V0),
-                    np.sum(p.V0), np.sum(p.V0 * (p.u[:, 1] - ua) ** 2), np.sum(p.V0 * ua ** 2),
-                    np.sum(p.u[top, 1]), np.sum(ua[top]), np.count_nonzero(top)])
-    tot = comm.allreduce(loc, op=MPI.SUM)
-    return dict(stress=float(tot[0] / (density * g * height * tot[1])),
-                displacement=float(np.sqrt(tot[2] / tot[3])),
-                settlement=float(abs(tot[4] / tot[5] - 1.0)), wall=wall,
-                newton=list(integ.iterations))

@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from .. import axisymmetric as axi
+from ..kernels import axisymmetric as axi
 from ..boundaries import particle_layer as kl
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
@@ -56,7 +56,7 @@ class _Newton:
 
     def assemble_tangent(self, sim, A4, plan, diag_add, constrained, extra=None):
         """K = sum_p V_p B^T A_p B + diag(diag_add) (+ extra terms, + the hoop terms of
-        fenicsmpm.axisymmetric) into the PETSc matrix."""
+        fenicsmpm.kernels.axisymmetric) into the PETSc matrix."""
         if sim.axisymmetric:
             def extra(data, more=extra):
                 axi.hoop_stiffness(sim.nodes, sim.N, sim.dN, sim.particles.V, A4, sim._r, plan,

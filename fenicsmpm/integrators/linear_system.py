@@ -9,7 +9,7 @@ import dolfinx.fem.petsc
 from numba import njit
 from petsc4py import PETSc
 
-from ..kernels import shape as kt_shape
+from ..shapes import standard as kt_shape
 from ..kernels import transfer as kt
 
 DEFAULT_PREFIX = "fenicsmpm_"

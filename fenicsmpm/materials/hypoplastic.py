@@ -626,12 +626,12 @@ class Hypoplastic:
 def geostatic(particles, material, gravity, K0=None, void_ratio="constant", surface=None):
     """K0 (geostatic) stress and void-ratio field of hypoplastic particles.
 
-    sigma_v = -rho g d, sigma_h = K0 sigma_v (fenicsmpm.initial_stress.k0_stress), default
+    sigma_v = -rho g d, sigma_h = K0 sigma_v (fenicsmpm.materials.initial_stress.k0_stress), default
     K0 = 1 - sin phi_c (Jaky).  void_ratio: "constant" (e_0 everywhere) or "relative" (the
     pressure-independent relative density r = (e_c0 - e_0)/(e_c0 - e_d0) kept with depth:
     e = e_c(p) - r (e_c(p) - e_d(p)), eq 3.15), checked against [e_d(p), e_i(p)].
     Collective under MPI (as k0_stress).  Returns the depths d of the local particles."""
-    from ..initial_stress import k0_stress
+    from .initial_stress import k0_stress
     m = material
     if void_ratio not in ("constant", "relative"):
         raise ValueError(f"geostatic: 'void_ratio' must be 'constant' or 'relative', "

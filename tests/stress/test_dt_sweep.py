@@ -23,7 +23,7 @@ from mpi4py import MPI
 
 import fenicsmpm as fm
 from fenicsmpm.bench.stability import bar_dt_critical, bar_energy
-from fenicsmpm.verification import vibrating_bar
+from fenicsmpm.problems.elastic import vibrating_bar
 
 STEPS = 500
 N_CELLS = 20

@@ -1,6 +1,6 @@
 """Stress (short version): high-velocity impact of two elastic discs (BENCHMARKS L2 at 10x).
 
-verification.colliding_discs(speed=1.0): discs of radius 0.2 in the unit square (20 x 20
+problems.elastic.colliding_discs(speed=1.0): discs of radius 0.2 in the unit square (20 x 20
 quadrilaterals, 2x2 ppc), E = 1000, nu = 0.3, rho = 1000 (c_p = 1.16 m/s), each moving at
 (1, 1) m/s towards the other: closing speed 2.8 m/s = 2.4 c_p. Explicit, dt = cfl 0.5 h / c_p,
 to t = 0.6 s (contact at 0.159 s, compression, rebound; at ~0.73 s the discs reach the walls

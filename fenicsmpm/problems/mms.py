@@ -28,11 +28,11 @@ import numpy as np
 from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
-from .grid import Grid, vertex_ghost_partitioner
-from .kernels import transfer as kt
-from .materials import NeoHookean
-from .particles import Particles
-from .simulation import Simulation
+from ..grid import Grid, vertex_ghost_partitioner
+from ..kernels import transfer as kt
+from ..materials import NeoHookean
+from ..particles import Particles
+from ..simulation import Simulation
 
 __all__ = ["BodyForceSimulation", "AxisAligned", "axis_aligned", "errors"]
 

@@ -142,7 +142,7 @@ def initial_edges(grid, particles):
     edges e_k = x_(vertex 2^k) - x_(vertex 0) scaled by sqrt(V0_p / |e1 x e2|) (for
     Particles.fill with n per direction: e_k / n on parallelogram cells); on triangles an
     axis-aligned square of side sqrt(V0_p)."""
-    from . import shape as ks
+    from . import standard as ks
     n = len(particles)
     r0 = np.zeros((n, 2, 2))
     if grid.kind == ks.SIMPLEX:
@@ -226,7 +226,7 @@ class CpdiShape:
 def shape_at_points(g, points, cells_hint):
     """Standard-MPM (nodes, N, dN) at points (n, k, 2) of n particles, flattened to n k rows.
     A point outside the local mesh uses its particle's cell (`cells_hint`), extended linearly."""
-    from . import shape as ks
+    from . import standard as ks
     n, k = points.shape[:2]
     nvc = g.cell_nodes.shape[1]
     flat = np.ascontiguousarray(points.reshape(-1, 2))

@@ -25,7 +25,7 @@ l_p,k = l_p,k^0 |F_kk| (the box follows the stretch along each axis).
 import numpy as np
 from numba import njit
 
-from ..axisymmetric import meridian_area
+from ..kernels.axisymmetric import meridian_area
 
 
 @njit(cache=True)
@@ -150,7 +150,7 @@ def lattice(grid):
 
     Raises ValueError if the grid is not a lattice of equal axis-aligned boxes, one cell each."""
     from mpi4py import MPI
-    from . import shape as ks
+    from . import standard as ks
     comm = grid.comm
     s = grid._structured
     ok = grid.kind == ks.TENSOR and s is not None and s["table"].shape[1] == 1

@@ -2,14 +2,17 @@
 the demos and the benchmark suite.
 
 Each builder returns a ready `Simulation` and a dict of exact answers."""
+import time
+
 import numpy as np
 from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
-from .grid import Grid
-from .materials import LinearElastic
-from .particles import Particles
-from .simulation import Simulation
+from ..grid import Grid, vertex_ghost_partitioner
+from ..integrators import DoubleMappingQuasiStatic, QuasiStatic
+from ..materials import LinearElastic
+from ..particles import Particles
+from ..simulation import Simulation
 
 
 def _partitioner(partitioner):
@@ -95,3 +98,50 @@ def colliding_discs(integrator, n_cells=20, per_cell=2, cfl=0.5, speed=0.1,
     sim = Simulation(grid, pts, integrator, dt=dt)
     contact = (np.linalg.norm(centres[1] - centres[0]) - 0.4) / (2 * speed * np.sqrt(2))
     return sim, dict(contact_time=contact, kinetic_energy=0.5 * 1000.0 * np.pi * 0.2 ** 2 * 2 * 2 * speed ** 2)
+
+
+def self_weight_errors(method="dmgc", shape="ugimp", n_cells=10, per_cell=2, load_steps=5,
+                       height=10.0, E=1e8, nu=0.0, density=2000.0, g=10.0, comm=MPI.COMM_WORLD,
+                       **newton):
+    """V2 small strain (BENCHMARKS.md): the elastic column under self-weight of
+    self_weight_column (one cell wide, one empty cell row on top,
+    rollers on the sides and base, LinearElastic, gravity ramped over `load_steps`
+    quasi-static steps), on a vertex-ghost partitioned mesh with GIMP `shape`, solved with
+    DoubleMappingQuasiStatic (method="dmgc") or fm.QuasiStatic ("standard"). Collective.
+
+    Returns dict(stress, displacement, settlement, wall, newton):
+      stress        sum_p |sigma_yy,p - sigma_a(Y_p)| V0_p / (rho g H sum_p V0_p),
+      displacement  sqrt(sum_p V0_p (u_y,p - u_a(Y_p))^2 / sum_p V0_p u_a(Y_p)^2),
+      settlement    |mean u_y of the top particles / u_a(Y_top) - 1|,
+      wall          seconds of sim.run (largest over ranks),  newton: iterations per step,
+    with sigma_a = -rho g (H - Y), u_a = -rho g (H Y - Y^2 / 2) / M at the initial height Y."""
+    if method not in ("dmgc", "standard"):
+        raise ValueError(f"self_weight_errors: 'method' must be 'dmgc' or 'standard', got {method!r}")
+    h = height / n_cells
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [h, height + h]], [1, n_cells + 1],
+                                 dmesh.CellType.quadrilateral, partitioner=vertex_ghost_partitioner())
+    grid = Grid(msh)
+    mat = LinearElastic(E=E, nu=nu, density=density)
+    pts = Particles.fill(grid, mat, per_cell=per_cell, region=lambda x: x[:, 1] < height)
+    integ = (DoubleMappingQuasiStatic if method == "dmgc" else QuasiStatic)(load_steps=load_steps, **newton)
+    sim = Simulation(grid, pts, integ, dt=1.0, gravity=(0.0, -g), shape=shape)
+    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], h), [0])
+    sim.fix(lambda x: np.isclose(x[:, 1], 0.0), [1])
+    comm.barrier()
+    t0 = time.perf_counter()
+    sim.run(steps=load_steps, progress=False)
+    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    p = sim.particles
+    Y = (p.x - p.u)[:, 1]
+    M = mat.constrained_modulus
+    ua = -density * g * (height * Y - 0.5 * Y ** 2) / M
+    ytop = comm.allreduce(float(Y.max()) if len(Y) else -np.inf, op=MPI.MAX)
+    top = np.abs(Y - ytop) < 1e-9 * height
+    loc = np.array([np.sum(np.abs(p.stress[:, 1, 1] + density * g * (height - Y)) * p.V0),
+                    np.sum(p.V0), np.sum(p.V0 * (p.u[:, 1] - ua) ** 2), np.sum(p.V0 * ua ** 2),
+                    np.sum(p.u[top, 1]), np.sum(ua[top]), np.count_nonzero(top)])
+    tot = comm.allreduce(loc, op=MPI.SUM)
+    return dict(stress=float(tot[0] / (density * g * height * tot[1])),
+                displacement=float(np.sqrt(tot[2] / tot[3])),
+                settlement=float(abs(tot[4] / tot[5] - 1.0)), wall=wall,
+                newton=list(integ.iterations))

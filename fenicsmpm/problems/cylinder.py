@@ -1,5 +1,5 @@
 """Axisymmetric verification: a thick cylinder a <= r <= b under internal pressure, plane
-strain in z (rollers on z = 0 and z = H), quasi-static (fenicsmpm.axisymmetric).
+strain in z (rollers on z = 0 and z = H), quasi-static (fenicsmpm.kernels.axisymmetric).
 
 - Linear elastic (Lame): sigma_rr = A - B / r^2, sigma_tt = A + B / r^2,
   u_r = (1 + nu) / E (A (1 - 2 nu) r + B / r),  A = p a^2 / (b^2 - a^2), B = p a^2 b^2 / (b^2 - a^2).

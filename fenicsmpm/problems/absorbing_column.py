@@ -54,11 +54,11 @@ import numpy as np
 from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
-from .boundaries import Robin, Viscoelastic, Viscous
-from .grid import Grid
-from .materials import LinearElastic
-from .particles import Particles
-from .simulation import Simulation
+from ..boundaries import Robin, Viscoelastic, Viscous
+from ..grid import Grid
+from ..materials import LinearElastic
+from ..particles import Particles
+from ..simulation import Simulation
 
 E, NU, RHO = 20.0e6, 0.25, 1500.0
 T0, A = 0.05, 0.021                     # pulse centre and width [s]

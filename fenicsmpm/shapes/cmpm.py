@@ -62,7 +62,7 @@ def cmpm_shape(x, cell, cell_lat, origin, spacing, ncell, clo, cnl, ctable, mate
     x (n, d); cell: the particle's local cell, cell_lat (n_cells, d) the global lattice index
     of every local cell; ncell: global cells per axis; clo/cnl/ctable: the local cell lattice
     (first index and count per axis, flat -> local cell or -1); material (n_cells,): cells
-    the stencil may extend into; ilo/nlat/table: the node lattice (kernels.gimp.lattice).
+    the stencil may extend into; ilo/nlat/table: the node lattice (shapes.gimp.lattice).
     Output padded to 4^d columns (padding: a stencil node with N = dN = 0). Returns -1, or
     the index of a particle whose stencil reaches a cell or node that is not local (the
     caller raises)."""
@@ -152,7 +152,7 @@ def cmpm_shape(x, cell, cell_lat, origin, spacing, ncell, clo, cnl, ctable, mate
 
 
 class CompositeBasis:
-    """CMPM shape functions of a structured grid; `lat` is kernels.gimp.lattice(grid) (computed,
+    """CMPM shape functions of a structured grid; `lat` is shapes.gimp.lattice(grid) (computed,
     collectively, when not given). cell_lat (n_cells, d): the global lattice index of every
     local cell; ncell: global cells per axis; clo, cnl, ctable: the local cell lattice (first
     index and count per axis; flat index, axis 0 fastest, -> local cell or -1)."""

@@ -1,6 +1,6 @@
 """Explicit MPM with one velocity field per body: multi-velocity frictional contact
 (Bardenhagen et al. 2000/2001; seed 004 §2.6.2, eqs 2.34-2.39), penalty node-to-segment
-contact (seed 004 eqs 2.40-2.53, integrators.penalty_contact) and rigid bodies with
+contact (seed 004 eqs 2.40-2.53, contact.penalty) and rigid bodies with
 prescribed motion.
 
 Bodies. A particle's body is the optional particle field `body` (int32; set it with
@@ -55,11 +55,11 @@ Rigid bodies: `rigid={body_id: velocity}` with velocity a vector or a function t
 Their particles move with that velocity (no stress update), their nodal velocity is the
 prescribed one, and at a node they share with deformable bodies v^cm is the rigid
 velocity (the rigid body has infinite inertia). A rigid body may instead be driven by a
-force, rigid={b: fm.RigidLoad(force, gravity)} (integrators.rigid: its velocity follows the
+force, rigid={b: fm.RigidLoad(force, gravity)} (contact.rigid: its velocity follows the
 applied force, its weight and the contact reaction of the step). `body_contact_force[b]` of a
 rigid body is that reaction: minus the contact forces on the other bodies at its nodes.
 
-Penalty contact (algorithm="penalty", 2D; seed 004 eqs 2.40-2.53; integrators.penalty_contact
+Penalty contact (algorithm="penalty", 2D; seed 004 eqs 2.40-2.53; contact.penalty
 has the equations, the sign convention g_n < 0 = penetration, the Coulomb cap |f_t| <= mu f_n
 with f_n >= 0 compressive, the MPI scheme and the stability limit): every body needs a
 boundary polyline, `add_polyline(body, vertices, closed=False)`; the vertices move with the
@@ -73,7 +73,7 @@ pairs and largest penetration.
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
 boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
 and their force is shared among the bodies at a node by mass, like the external force.
-Axisymmetric grids get the hoop terms of fenicsmpm.axisymmetric per body (multi-velocity
+Axisymmetric grids get the hoop terms of fenicsmpm.kernels.axisymmetric per body (multi-velocity
 only). Particle-layer boundaries are not supported by this integrator."""
 import time
 
@@ -81,9 +81,9 @@ import numpy as np
 from numba import njit
 
 from ..kernels import transfer as kt
-from .explicit import SCHEMES
-from .. import axisymmetric as axi
-from .penalty_contact import PenaltyContact, check_polyline
+from ..integrators.explicit import SCHEMES
+from ..kernels import axisymmetric as axi
+from .penalty import PenaltyContact, check_polyline
 from .rigid import RigidLoad
 
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
@@ -429,7 +429,7 @@ class ExplicitContact:
     def add_polyline(self, body, vertices, closed=False):
         """Boundary polyline of body `body` for algorithm="penalty": vertices (n, 2) in order;
         closed=True joins the last to the first (made counter-clockwise); an open one must have
-        the body on its left (integrators.penalty_contact: circle, rectangle, line)."""
+        the body on its left (contact.penalty: circle, rectangle, line)."""
         if self.algorithm != "penalty":
             raise ValueError("ExplicitContact.add_polyline: only for algorithm='penalty'")
         if not (isinstance(body, (int, np.integer)) and body >= 0):

@@ -20,7 +20,7 @@ import numpy as np
 import ufl
 from numba import njit
 
-from .kernels.transfer import add_block
+from .transfer import add_block
 
 
 def radius_weight(grid):
@@ -44,7 +44,7 @@ def check_radius(x, owner):
 def hoop_strain(nodes, N, field, rigid, w, scale, r, dF):
     """dF_p,tt = 1 + scale sum_i N_ip w[i, field_p, r] / r_p, with one nodal field per column
     of w (n_nodes, n_fields, 2): a single column for single-field MPM, one per body in
-    multi-velocity contact (integrators.contact), where rigid bodies keep dF_tt = 1."""
+    multi-velocity contact (contact.multi_velocity), where rigid bodies keep dF_tt = 1."""
     for p in range(nodes.shape[0]):
         b = field[p]
         if rigid[b]:

@@ -57,7 +57,7 @@ import warnings
 import numpy as np
 from numba import njit
 
-from ..kernels import shape as ks
+from ..shapes import standard as ks
 
 __all__ = ["circle", "rectangle", "line", "PenaltyContact"]
 

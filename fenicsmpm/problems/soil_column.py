@@ -33,11 +33,11 @@ import math
 import numpy as np
 from mpi4py import MPI
 
-from .boundaries.base_motion import InputMotion, compliant_base, rigid_base
-from .grid import Grid
-from .materials import LinearElastic
-from .particles import Particles
-from .simulation import Simulation
+from ..boundaries.base_motion import InputMotion, compliant_base, rigid_base
+from ..grid import Grid
+from ..materials import LinearElastic
+from ..particles import Particles
+from ..simulation import Simulation
 
 H, E, NU, GAMMA_UNIT = 10.0, 1.0e7, 0.33, 18.5e3
 RHO = GAMMA_UNIT / 9.81
@@ -158,7 +158,7 @@ def soil_column(integrator, h=0.25, width=None, per_cell=2, base="rigid", motion
     if gravity not in (None, False, "sudden", "k0"):
         raise ValueError(f"soil_column: 'gravity' must be None, 'sudden' or 'k0', got {gravity!r}")
     if gravity == "k0":
-        from .initial_stress import k0_stress
+        from ..materials.initial_stress import k0_stress
         k0_stress(pts, K0=0.5)
     sim = Simulation(grid, pts, integrator, dt=dt, cfl=cfl, on_leave="periodic",
                      gravity=(0.0, -9.81) if gravity else None)

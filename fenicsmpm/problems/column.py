@@ -28,11 +28,11 @@ import numpy as np
 from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
-from .grid import Grid, vertex_ghost_partitioner
-from .integrators import Explicit
-from .materials.hencky import Hencky
-from .particles import Particles
-from .simulation import Simulation
+from ..grid import Grid, vertex_ghost_partitioner
+from ..integrators import Explicit
+from ..materials.hencky import Hencky
+from ..particles import Particles
+from ..simulation import Simulation
 
 __all__ = ["DampedExplicit", "ColumnExact", "large_deformation_column", "errors",
            "explicit_time"]

@@ -3,7 +3,7 @@
 Seed 002 §3.3.1 (eqs 3.16-3.22), with the erratum of BENCHMARKS.md ("Errata in seed 002":
 in (3.17) the derivative inside the sum is that of the grid function N_i, not of N-bar).
 The particle's voxel, initially the parallelogram of edge vectors r1^0, r2^0 (area V0_p,
-kernels.cpdi.initial_edges: along the cell edges on quadrilaterals, axis-aligned squares on
+shapes.cpdi.initial_edges: along the cell edges on quadrilaterals, axis-aligned squares on
 triangles), is integrated by 2 x 2 Gauss points pushed forward by the particle's F (eqs
 3.20-3.22, dx = F dx^0):
     x_g = x_p + F_p (s r1^0 + t r2^0) / (2 sqrt 3),   s, t = +-1   (r_g = +-l/(2 sqrt 3)
@@ -81,7 +81,7 @@ class GaussGimpShape:
     """Deformed-voxel GIMP by 2 x 2 Gauss quadrature for a 2D Simulation (module docstring).
 
     Adds the particle field `cpdi_r0` (n, 2, 2), the initial voxel edge vectors
-    (kernels.cpdi.initial_edges; shared with CPDI). Like CPDI, the Gauss points may lie in
+    (shapes.cpdi.initial_edges; shared with CPDI). Like CPDI, the Gauss points may lie in
     the cells around the particle's cell: in parallel the mesh needs the shared-vertex ghost
     layer (partitioner=fenicsmpm.grid.vertex_ghost_partitioner())."""
 

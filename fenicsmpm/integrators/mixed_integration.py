@@ -32,7 +32,7 @@ particle-quadrature stiffness (an approximate Jacobian). Shape "mpm" only, plane
 import numpy as np
 from numba import njit
 
-from .kernels.shape import SIMPLEX, _inv_small, _q1_basis
+from ..shapes.standard import SIMPLEX, _inv_small, _q1_basis
 
 FULL_FILL = 0.5
 

@@ -1,0 +1,83 @@
+"""Energy monitor of a Simulation (EnergyMixin, inherited by fenicsmpm.Simulation): kinetic and
+strain energy, the work of external and boundary forces recorded by the integrators, and the
+balance check E_kin + E_strain - W_ext - W_boundary = E_0."""
+import warnings
+
+import numpy as np
+
+from .io import ProbeWriter
+
+
+class EnergyMixin:
+    """Energy methods of fenicsmpm.Simulation."""
+
+    def energy(self):
+        """Global kinetic and strain energy, and with `monitor_energy` the work done by the
+        external loads (gravity, tractions, particle loads) and by Robin/absorbing boundaries
+        (negative: energy they took out) since monitoring started (collective)."""
+        p = self.particles
+        e = dict(kinetic=p.kinetic_energy(), strain=p.strain_energy())
+        if self._work is not None:
+            w = self.comm.allreduce(self._work) if self.comm.size > 1 else self._work
+            e.update(external_work=float(w[0]), boundary_work=float(w[1]))
+        return e
+
+    @property
+    def monitoring_work(self):
+        """Whether `monitor_energy` asked the integrator to record the work of the forces."""
+        return self._work is not None
+
+    def record_work(self, f_ext, f_boundary, v_start, v_end, dt):
+        """Integrators call this once per step when the energy is monitored: the work of the
+        nodal external and boundary forces over the step, dt f . (v_start + v_end) / 2, summed
+        over owned nodes (kept per rank; `energy` reduces it)."""
+        if self._work is None:
+            return
+        n = self.grid.n_owned_nodes
+        vm = 0.5 * (v_start[:n] + v_end[:n])
+        self._work[0] += dt * float(np.einsum("ij,ij->", f_ext[:n], vm))
+        if f_boundary is not None:
+            self._work[1] += dt * float(np.einsum("ij,ij->", f_boundary[:n], vm))
+
+    def monitor_energy(self, every=10, tolerance=0.02, path=None):
+        """Track the energy balance E_kin + E_strain - W_ext - W_boundary = E_0 every `every`
+        steps (history in `energy_history`, CSV at `path`) and warn, once, when its error
+        exceeds `tolerance` times the largest energy seen. fm.Explicit and fm.Newmark record
+        the external and boundary work; other integrators raise a ValueError here."""
+        if not getattr(self.integrator, "records_work", False):
+            raise ValueError(f"monitor_energy: {type(self.integrator).__name__} does not record "
+                             f"the work of external and boundary forces")
+        if not (isinstance(every, (int, np.integer)) and every >= 1):
+            raise ValueError(f"monitor_energy: 'every' must be a positive integer, got {every!r}")
+        if not (tolerance > 0):
+            raise ValueError(f"monitor_energy: 'tolerance' must be > 0, got {tolerance!r}")
+        self._work = np.zeros(2)
+        self.energy_history = []
+        writer = None
+        if path is not None:
+            writer = ProbeWriter(path, ["t", "kinetic", "strain", "external_work",
+                                        "boundary_work", "balance_error"], self.comm)
+        state = dict(e0=None, scale=0.0, warned=False)
+
+        def check(sim):
+            e = sim.energy()
+            total = e["kinetic"] + e["strain"]
+            if state["e0"] is None:
+                state["e0"] = total - e["external_work"] - e["boundary_work"]
+            state["scale"] = max(state["scale"], total, abs(e["external_work"]),
+                                 abs(e["boundary_work"]), 1e-300)
+            err = (total - e["external_work"] - e["boundary_work"] - state["e0"]) / state["scale"]
+            e.update(t=sim.t, balance_error=err)
+            sim.energy_history.append(e)
+            if writer is not None and sim.comm.rank == 0:
+                writer.write_row(e)
+            if abs(err) > tolerance and not state["warned"]:
+                state["warned"] = True
+                if sim.comm.rank == 0:
+                    warnings.warn(f"step {sim.step_count}, t = {sim.t:.6g}: energy balance error "
+                                  f"{err:.3%} of the largest energy exceeds {tolerance:.3%}",
+                                  RuntimeWarning, stacklevel=2)
+
+        check(self)
+        self.observe(check, every)
+        return self.energy_history

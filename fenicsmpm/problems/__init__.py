@@ -1,0 +1,10 @@
+"""Known-answer problems (BENCHMARKS.md): builders that return a ready Simulation with its exact
+solution and error measures, shared by the tests, the demos and the benchmark suite.
+
+    elastic            V1 vibrating bar, V2 small-strain column (explicit and DM-GC), L2 discs
+    column             V2 large-strain (AMPLE) column
+    mms                V3 manufactured solution
+    cylinder           thick cylinder (Lame, Hill) on axisymmetric grids
+    absorbing_column   W1 pulse in a column on fixed/viscous/viscoelastic bases
+    soil_column        P1 site response of a soil column
+"""

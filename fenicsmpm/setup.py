@@ -1,0 +1,222 @@
+"""The set-up API of a Simulation (SetupMixin, inherited by fenicsmpm.Simulation): Dirichlet
+conditions, tractions and particle loads, Robin and particle-layer boundaries, frictional
+boundaries, periodic sides, particle splitting, stages, observers and probes. These methods
+register what the stages of the time loop (simulation.py) then apply."""
+import math
+
+import numpy as np
+
+from .boundaries import ParticleLayer, Robin, RobinForms, Traction, fixed_dofs
+from .boundaries.friction import FrictionalBoundary
+from .boundaries.robin import facets_on_boundary
+from .io import Probe
+from .shapes import SHAPES
+from .kernels import transfer as kt
+from .splitting import Splitting
+
+FORCE_INTEGRATIONS = ("particles", "mixed")
+LEAVE_POLICIES = ("error", "remove", "periodic")
+
+
+def _check_ramp(T, owner):
+    if T is None:
+        return None
+    if not (isinstance(T, (int, float, np.floating)) and math.isfinite(T) and T > 0):
+        raise ValueError(f"{owner}: 'gravity_ramp' must be a time > 0 or None, got {T!r}")
+    return float(T)
+
+
+class SetupMixin:
+    """Set-up methods of fenicsmpm.Simulation (see there for the attributes they fill)."""
+
+    def fix(self, where, components=None):
+        """Fix the given displacement components (default: all) at nodes where(x) is True.
+
+        A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1])."""
+        self.fixed |= fixed_dofs(self.grid, where, components)
+
+    def add_particle_load(self, region, value):
+        """A force value(t) (a vector; per unit thickness in 2D) shared equally by the particles
+        selected by region(x) now, mapped to the grid with their shape functions,
+        f_i += sum_p N_ip value(t) / n. Unlike a facet traction it follows the material (the
+        thesis's point load "applied to the top material points"). Returns the global number
+        of loaded particles."""
+        if not (callable(region) and (callable(value) or np.ndim(value) == 1)):
+            raise TypeError("add_particle_load: need region(x) -> bool and a vector or t -> vector")
+        p = self.particles
+        sel = np.asarray(region(p.x), dtype=bool)
+        n = int(np.count_nonzero(sel))
+        n = self.comm.allreduce(n) if self.comm.size > 1 else n
+        if n == 0:
+            raise ValueError("add_particle_load: 'region' selects no particle")
+        name = f"load_share_{len(self.particle_loads)}"
+        p.add_field(name)[sel] = 1.0 / n
+        self.particle_loads.append((name, Traction(lambda x: True, value)))
+        return n
+
+    def _particle_load_force(self, t, out):
+        p = self.particles
+        for name, load in self.particle_loads:
+            share = getattr(p, name)
+            sel = np.flatnonzero(share)
+            if len(sel):
+                vec = np.ascontiguousarray(np.broadcast_to(load.at(t, self.gdim), (len(sel), self.gdim)))
+                kt.p2g_weighted(self.grid.D, self.nodes[sel], self.N[sel], share[sel], vec, out)
+
+    def release(self, where=None, components=None):
+        """Remove Dirichlet conditions at nodes where(x) (default: everywhere) on the given
+        components (default: all), e.g. to replace a fixed base by an absorbing one."""
+        mask = (np.ones((self.grid.n_nodes, self.gdim), dtype=bool) if where is None
+                else fixed_dofs(self.grid, where, components))
+        self.fixed &= ~mask
+
+    def start_stage(self, integrator=None, dt=None, gravity=None, initial_stress=True,
+                    reset_displacement=True, gravity_ramp=None):
+        """Begin a new stage on this simulation (seed 000 §3.5), e.g. after a static gravity
+        stage: `sim.start_stage(fm.Newmark(), dt=5e-3, gravity=(0, 0))` then swap boundaries
+        with `release` and `add_boundary`.
+
+        initial_stress: keep the current stress as sigma_ini; from now on the internal force
+          comes from sigma_dyn = sigma - sigma_ini while materials see the total stress, so
+          removing gravity together with sigma_ini leaves the body in equilibrium.
+        reset_displacement: measure particle displacements (and Robin spring displacements)
+          from the start of the stage.
+        gravity_ramp: ramp time T of this stage's gravity (see Simulation), None: no ramp."""
+        p = self.particles
+        if integrator is not None:
+            if self.frictions and not getattr(integrator, "supports_friction", False):
+                raise NotImplementedError("start_stage: frictional boundaries need fm.Explicit, "
+                                          f"not {type(integrator).__name__}")
+            self.integrator = integrator
+            integrator.setup(self)
+            self._robin = None                    # recompile for the new integrator
+        if dt is not None or integrator is not None:
+            self.dt = self._check_dt(self.dt if dt is None else dt)
+        if gravity is not None:
+            g = np.asarray(gravity, dtype=np.float64)
+            if g.shape != (self.gdim,) or not np.all(np.isfinite(g)):
+                raise ValueError(f"start_stage: 'gravity' must be a finite vector of length "
+                                 f"{self.gdim}, got {gravity!r}")
+            self.gravity = g
+        self.gravity_ramp = _check_ramp(gravity_ramp, "start_stage")
+        self.initial_stress = bool(initial_stress)
+        if initial_stress:
+            p.add_field("stress_initial", (3, 3))[:] = p.stress
+        if reset_displacement:
+            p.u[:] = 0.0
+            self.robin_u[:] = 0.0
+            if hasattr(p, "layer_u0"):
+                p.layer_u0[:] = 0.0
+        p.a[:] = 0.0
+        self.stage_start = self.t
+
+    def set_periodic(self, axis=0):
+        """Periodic sides normal to `axis` (boundaries.periodic): the node pairs at equal
+        position on the two faces are tied (masses, momenta, forces summed; one solution, in
+        explicit and implicit runs). With on_leave="periodic" a particle leaving through one
+        face re-enters through the other. shape="mpm" only. Returns the PeriodicTie."""
+        from .boundaries.periodic import PeriodicTie
+        if self.shape != "mpm":
+            raise NotImplementedError(f"set_periodic: shape={self.shape!r}; periodic sides "
+                                      f"support shape='mpm' only")
+        self.grid.periodic = PeriodicTie(self.grid, axis)
+        return self.grid.periodic
+
+    def add_friction(self, where, mu, normal=None):
+        """A rigid frictional boundary on the grid nodes where(x) with Coulomb coefficient `mu`
+        and outward unit normal `normal` (a vector), or, with normal=None, the normals of the
+        mesh facets where(x) selects (inclined and curved bases); boundaries.friction, seed 002
+        §5.1: unilateral contact decided by the gap between the particles and the base, stick
+        or slip. Explicit integrators (fm.Explicit, fm.ExplicitContact) only; do not also
+        `fix` the normal component there. Returns the boundary: its `reaction()` (collective)
+        is the force the material exerted on it in the last step."""
+        if not getattr(self.integrator, "supports_friction", False):
+            raise NotImplementedError(f"add_friction: frictional boundaries need fm.Explicit or "
+                                      f"fm.ExplicitContact, not {type(self.integrator).__name__}; "
+                                      f"in implicit runs fix the base (sim.fix) instead")
+        fr = FrictionalBoundary(where, mu, normal).bind(self.grid)
+        self.frictions.append(fr)
+        return fr
+
+    def enable_splitting(self, alpha=2.0, beta=0.5, gamma=1.0, every=1):
+        """Split particles whose voxel stretched beyond alpha, shrank below beta or sheared
+        beyond gamma since their creation (seed 002 §3.4.1 eq 3.25; fenicsmpm.splitting).
+        The number split so far is `splitting.count`; the last step's is stats["split"]."""
+        if self.layers:
+            raise ValueError("enable_splitting: particle-layer boundaries cannot be split")
+        self.splitting = Splitting(self, alpha, beta, gamma, every)
+        return self.splitting
+
+    def add_traction(self, where, value):
+        """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
+        self.tractions.append(Traction(where, value))
+        self._traction_forms = None
+
+    def add_boundary(self, boundary):
+        """Add a Robin boundary: fm.Viscous, fm.Viscoelastic or a user fm.Robin law on mesh
+        facets, or an fm.ParticleLayer (the law on a layer of particles). Its displacement u
+        is measured from the time it is added. Mesh forms are compiled once, at the next step."""
+        if isinstance(boundary, ParticleLayer):
+            if self.axisymmetric:
+                raise NotImplementedError("add_boundary: particle-layer boundaries are not "
+                                          "implemented on axisymmetric grids; use a mesh boundary")
+            boundary.attach(self.particles)
+            self.layers.append(boundary)
+            self._layer_version = None
+            return
+        if not isinstance(boundary, Robin):
+            raise TypeError(f"add_boundary: expected fm.Robin, fm.Viscous or fm.Viscoelastic, "
+                            f"got {type(boundary).__name__}")
+        facets_on_boundary(self.grid, boundary.where, type(boundary).__name__)
+        boundary.bind(self.particles.materials)       # checks material constants now
+        self.boundaries.append(boundary)
+        self._robin = None
+
+    @property
+    def robin(self):
+        """The compiled Robin forms (built on first use), or None without Robin boundaries."""
+        if self._robin is None and self.boundaries:
+            self._robin = RobinForms(self.grid, self.boundaries, self.particles.materials,
+                                     implicit=not self.integrator.explicit)
+        return self._robin
+
+    def observe(self, callback, every=1):
+        """Call callback(sim) after every `every` steps (energy monitors, custom output)."""
+        if not callable(callback):
+            raise TypeError(f"observe: 'callback' must be callable, got {type(callback).__name__}")
+        if not (isinstance(every, (int, np.integer)) and every >= 1):
+            raise ValueError(f"observe: 'every' must be a positive integer, got {every!r}")
+        self.observers.append((callback, int(every)))
+
+    def probe(self, point, fields=("velocity",), path=None, every=1):
+        """Record fields of the particle nearest to `point` (by its initial position)."""
+        pr = Probe(self, point, fields, path, every)
+        self.probes.append(pr)
+        return pr
+
+
+    def _check_options(self, on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp, force_integration):
+        """Check and store the options of Simulation() (see there)."""
+        if on_leave not in LEAVE_POLICIES:
+            raise ValueError(f"Simulation: 'on_leave' must be one of {LEAVE_POLICIES}, got {on_leave!r}")
+        if not (isinstance(max_dt_cuts, (int, np.integer)) and 0 <= max_dt_cuts <= 20):
+            raise ValueError(f"Simulation: 'max_dt_cuts' must be an integer in [0, 20], got {max_dt_cuts!r}")
+        self.on_leave, self.max_dt_cuts = on_leave, int(max_dt_cuts)
+        if stress_feedback not in (None, "smoothed"):
+            raise ValueError(f"Simulation: 'stress_feedback' must be None or 'smoothed', got {stress_feedback!r}")
+        if stress_feedback is not None and not self.integrator.explicit:
+            raise NotImplementedError("Simulation: stress_feedback='smoothed' needs an explicit integrator")
+        self.stress_feedback = stress_feedback
+        self.gravity_ramp = _check_ramp(gravity_ramp, "Simulation")
+        if force_integration not in FORCE_INTEGRATIONS:
+            raise ValueError(f"Simulation: 'force_integration' must be one of {FORCE_INTEGRATIONS}, "
+                             f"got {force_integration!r}")
+        if force_integration == "mixed" and shape != "mpm":
+            raise NotImplementedError(f"Simulation: force_integration='mixed' needs shape='mpm', got {shape!r}")
+        self.force_integration = force_integration
+        if self.axisymmetric and (shape not in ("mpm", "ugimp", "cpgimp") or force_integration != "particles"):
+            raise NotImplementedError(f"Simulation: axisymmetric grids support shape 'mpm', 'ugimp' "
+                                      f"and 'cpgimp' with particle integration, got shape={shape!r}, "
+                                      f"force_integration={force_integration!r}")
+        if shape not in SHAPES:
+            raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
