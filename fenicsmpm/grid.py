@@ -72,7 +72,7 @@ class Grid:
         self.structured = self._structured is not None
         self._tree = None
         self._exchange = {}
-        self._max_vec = None
+        self._max_vec = {}
         self.periodic = None     # boundaries.periodic.PeriodicTie, applied by accumulate
         self.axisymmetric = bool(axisymmetric)
         if self.axisymmetric:
@@ -259,20 +259,29 @@ class Grid:
         if self.periodic is not None:
             self.periodic.tie(*arrays)
 
-    def reduce_max(self, values, nodes):
-        """The maximum over ranks of per-node values given at local `nodes` (an owned or
-        ghost node shared by ranks gets the largest value any rank has); collective."""
+    def reduce_max(self, values, nodes=None):
+        """The maximum over ranks of per-node values, (n_nodes,) or (n_nodes, k), or given at
+        local `nodes` only: a node shared by ranks gets the largest value any rank has (a
+        reverse scatter with MAX, then forward); collective."""
         from petsc4py import PETSc
-        if self._max_vec is None:
-            self._max_vec = dolfinx.la.create_petsc_vector(self.V.dofmap.index_map, 1)
-        vec = self._max_vec
+        v = np.asarray(values, dtype=np.float64)
+        bs = 1 if v.ndim == 1 else v.shape[1]
+        vec = self._max_vec.get(bs)
+        if vec is None:
+            vec = self._max_vec[bs] = dolfinx.la.create_petsc_vector(self.V.dofmap.index_map, bs)
         with vec.localForm() as loc:
-            loc.array[:] = -np.inf
-            loc.array[nodes] = values
+            a = loc.array.reshape(self.n_nodes, bs)
+            if nodes is None:
+                a[:] = v.reshape(self.n_nodes, bs)
+            else:
+                a[:] = -np.inf
+                a[nodes] = v.reshape(len(nodes), bs)
         vec.ghostUpdate(addv=PETSc.InsertMode.MAX_VALUES, mode=PETSc.ScatterMode.REVERSE)
         vec.ghostUpdate(addv=PETSc.InsertMode.INSERT, mode=PETSc.ScatterMode.FORWARD)
         with vec.localForm() as loc:
-            return loc.array[nodes].copy()
+            a = loc.array.reshape(self.n_nodes, bs)
+            out = (a if nodes is None else a[nodes]).copy()
+        return out.reshape(v.shape)
 
 
 def vertex_ghost_partitioner(partitioner=None):

@@ -146,3 +146,52 @@ def test_rough_base_under_explicit_contact(theta, mu):
         assert abs(along) < 0.005 * 0.5 * G * np.sin(th) * t ** 2, along
     else:
         assert abs(along - 0.5 * a * t ** 2) < 0.02 * 0.5 * a * t ** 2, (along, 0.5 * a * t ** 2)
+
+
+def _block_on_rigid_body(mu, theta=30.0, h=0.05, t_end=0.5):
+    """The block (body 0, geostatic) on a rigid body (body 1, held at rest, its face on the
+    grid line y = 0.25, prescribed outward normal (0, 1)); gravity rotated by theta. Returns
+    the history (t, along, normal) of the block's mass-weighted displacement."""
+    th, y0 = np.radians(theta), 0.25
+    msh = mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [3.0, 1.0]], [round(3 / h), round(1 / h)],
+                                mesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    p = fm.Particles.fill(grid, fm.LinearElastic(E=E, nu=NU, density=RHO), per_cell=2,
+                          region=lambda x: ((np.abs(x[:, 0] - 1.0) < 0.5) & (x[:, 1] < y0 + H))
+                          | (x[:, 1] < y0))
+    body = fm.set_body(p, 1, region=lambda x: x[:, 1] < y0)
+    blk = body == 0
+    depth = y0 + H - p.x[blk, 1]
+    p.stress[blk, 1, 1] = -RHO * G * np.cos(th) * depth
+    p.stress[blk, 0, 0] = p.stress[blk, 2, 2] = NU / (1 - NU) * p.stress[blk, 1, 1]
+    p.stress[blk, 0, 1] = p.stress[blk, 1, 0] = RHO * G * np.sin(th) * depth
+    integ = fm.ExplicitContact("MUSL", mu=mu, rigid={1: (0.0, 0.0)}, normal={1: (0.0, 1.0)})
+    sim = fm.Simulation(grid, p, integ, dt="auto", gravity=(G * np.sin(th), -G * np.cos(th)))
+    sel = lambda: p.body == 0
+    m0 = p.total(p.mass * sel())
+    c0 = np.array([p.total(p.mass * sel() * p.x[:, k]) for k in range(2)]) / m0
+    hist = []
+    sim.observe(lambda s: hist.append([s.t] + [p.total(p.mass * sel() * p.x[:, k]) / m0 - c0[k]
+                                               for k in range(2)]), every=5)
+    sim.run(t_end=t_end)
+    return np.array(hist)
+
+
+@pytest.mark.parametrize("mu", [0.7, 0.3, 0.0])
+def test_block_on_rigid_incline_body(mu):
+    """The incline as a rigid body (multi-velocity contact, exact gap against the rigid
+    body's particles, prescribed normal), 30 deg, 0.5 s from the geostatic state: mu = 0.7
+    sticks (measured 0.55 mm, < 0.5 % of the frictionless 613 mm; before: 156 mm) and does
+    not sink (measured 0.03 mm; before: 24 mm); mu = 0.3 within 2 % of a t^2 / 2 (measured
+    -0.02 %; before +10 %), mu = 0 within 0.5 % (measured -0.04 %)."""
+    h = _block_on_rigid_body(mu)
+    th = np.radians(30.0)
+    t, along = h[-1, 0], h[-1, 1]
+    a = G * (np.sin(th) - mu * np.cos(th))
+    assert h[:, 2].min() > -0.5e-3, h[:, 2].min()          # no sinking into the rigid body
+    if a <= 0:
+        assert abs(along) < 0.005 * 0.5 * G * np.sin(th) * t ** 2, along
+        assert h[:, 2].max() < 0.05e-3, h[:, 2].max()      # no lift
+    else:
+        exact = 0.5 * a * t ** 2
+        assert abs(along - exact) < (0.005 if mu == 0 else 0.02) * exact, (along, exact)

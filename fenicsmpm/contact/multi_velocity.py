@@ -36,18 +36,32 @@ present at the node, the rigid body's velocity), for each deformable body A ther
       |dv_t| <= mu dv_n:  stick,  v^A <- v^cm,
       otherwise:          slip,   v^A <- v^A - dv_n n^A - mu dv_n dv_t / |dv_t|.
 Gap check (gap=0.0 by default; gap=None switches it off and gives the plain algorithm of
-the seed, which detects contact as soon as two bodies share a node, one cell early): a
-node takes part only where the bodies' surfaces, estimated from their particles, meet:
+the seed, which detects contact as soon as two bodies share a node, one cell early). Between
+deformable bodies a node takes part only where the bodies' surfaces, estimated from their
+particles, meet:
   (x^B - x^A) . n^A - (r^A + r^B) <= gap * h,
 with x^b = sum N m_p x_p / m^b the body's mass-weighted particle position at the node,
 r^b = sum N m_p (V_p^(1/d) / 2) / m^b its mean particle half-size there, B the master (or
 the heaviest other body) and h the cell size (after Nairn's and Lemiale et al.'s
 displacement/position-based detection; the seed's eq 2.50 is the corner-based variant).
 Without it the front of a rolling cylinder sticks to the plane before it touches it: C1
-rolling at h = 0.4 m loses 24 % of its travel (bench `contact`).
+rolling at h = 0.4 m loses 24 % of its travel (bench `contact`). The estimate puts two flat
+bodies touching along a grid line h/4 apart (2 x 2 particles per cell), so against a RIGID
+body, whose particles are its surface, the gap is exact instead: along the normal line
+through the node, g = min over B's particles of x_p . n - r_p minus max over A's particles
+of x_p . n + r_p (particles with N_ip > 0 whose domain reaches that line), and the approach
+is limited to dv_n <= max(g - gap h, 0) / dt, so a body resting on a rigid one is in
+contact at once and does not sink (issue 17: a block on a rigid 30 deg incline sank 24 mm
+and slid 156 mm at mu = 0.7; now 0.03 mm and 0.55 mm).
+Contact status: the trial projection records per node and body no contact, slip or stick;
+MUSL/AVG's re-mapped velocity, which the stress update sees, keeps that decision (normal
+relative velocity = the allowed approach, stuck bodies with v^cm) instead of deciding anew,
+so the strain sees the bodies in contact exactly where the momentum was. For a flat rigid
+body prefer its prescribed normal, normal={body: outward normal}: with the mass-gradient
+normal the corners of a sliding block tilt it (-0.96 % on the frictionless incline against
+-0.04 %).
 For two free bodies the impulses on A and B are equal and opposite (m^A dv^A = -m^B dv^B and
-n^B = -n^A), so the step conserves momentum exactly. The same projection is applied to the
-re-mapped velocities of MUSL/AVG. The contact force on each body is kept per node in
+n^B = -n^A), so the step conserves momentum exactly. The contact force on each body is kept per node in
 `self.contact_force` (n_nodes, nb, gdim) and its global sum over the step in
 `self.body_contact_force` (nb, gdim), e.g. the resistance on a rigid pile.
 
@@ -89,6 +103,7 @@ from .rigid import RigidLoad
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
 
 ALGORITHMS = ("multi-velocity", "penalty")
+LATERAL = 1.5           # gap check: particles within LATERAL half-sizes of a node's normal line
 NORMALS = ("average", "max-gradient")
 
 
@@ -132,7 +147,8 @@ def p2g_bodies(D, nodes, N, dN, body, mass, v, m_b, mv_b, gm_b):
 @njit(cache=True)
 def p2g_positions_bodies(D, nodes, N, body, mass, x, V, xm_b, rm_b):
     """xm_b[i, b] += N m_p x_p and rm_b[i, b] += N m_p V_p^(1/d) / 2 (p in body b): with
-    m_b, the body's mass-weighted nodal position and particle half-size (gap check)."""
+    m_b, the body's mass-weighted nodal position and particle half-size (gap check between
+    deformable bodies)."""
     d = len(D)
     for p in range(nodes.shape[0]):
         b = body[p]
@@ -143,6 +159,67 @@ def p2g_positions_bodies(D, nodes, N, body, mass, x, V, xm_b, rm_b):
             rm_b[i, b] += w * r
             for k in range(d):
                 xm_b[i, b, k] += w * x[p, k]
+
+
+@njit(cache=True)
+def surface_extents(D, nodes, N, body, x, V, axis_r, node_x, ref_n, shared, lo_b, hi_b):
+    """Extent of each body along the normal line through every shared node i (direction
+    ref_n[i]): lo_b[i, b] = min, hi_b[i, b] = max of x_p . n_i -/+ r_p over the particles p
+    of body b with N_ip > 0 whose domain reaches that line (lateral offset <= LATERAL r_p),
+    r_p = (V_p)^(1/d) / 2 (meridian size on axisymmetric grids). lo_b starts at +inf, hi_b
+    at -inf (gap check of the module docstring)."""
+    d = len(D)
+    for p in range(nodes.shape[0]):
+        b = body[p]
+        vol = V[p] / x[p, 0] if axis_r else V[p]
+        r = 0.5 * vol ** (1.0 / d)
+        for a in range(nodes.shape[1]):
+            i = nodes[p, a]
+            if N[p, a] <= 0.0 or not shared[i]:
+                continue
+            s = 0.0
+            on = 0.0
+            o2 = 0.0
+            for k in D:
+                s += x[p, k] * ref_n[i, k]
+                on += (x[p, k] - node_x[i, k]) * ref_n[i, k]
+                o2 += (x[p, k] - node_x[i, k]) ** 2
+            if o2 - on * on > (LATERAL * r) ** 2:
+                continue
+            if s - r < lo_b[i, b]:
+                lo_b[i, b] = s - r
+            if s + r > hi_b[i, b]:
+                hi_b[i, b] = s + r
+
+
+@njit(cache=True)
+def reference_normals(present, rigid, gm_b, mode, n_fixed, has_fixed, ref_n, shared):
+    """For every node a rigid body shares with a deformable one: shared[i] = True and
+    ref_n[i] the outward normal (_normal) of its first deformable body there; the gap check
+    measures the bodies' extents along it."""
+    n, nb, d = gm_b.shape
+    G = np.empty(d)
+    nrm = np.empty(d)
+    for i in range(n):
+        has_rigid = False
+        first = -1
+        for b in range(nb):
+            if present[i, b]:
+                if rigid[b]:
+                    has_rigid = True
+                elif first < 0:
+                    first = b
+        if not has_rigid or first < 0:
+            continue
+        for k in range(d):
+            G[k] = 0.0
+            for b in range(nb):
+                if present[i, b]:
+                    G[k] += gm_b[i, b, k]
+        if _normal(i, first, present, gm_b, mode, n_fixed, has_fixed, G, nrm):
+            shared[i] = True
+            for k in range(d):
+                ref_n[i, k] = nrm[k]
 
 
 @njit(cache=True)
@@ -221,10 +298,16 @@ def _normal(i, a, present, gm_b, mode, n_fixed, has_fixed, G, nrm):
 
 @njit(cache=True)
 def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fixed, xm_b, rm_b,
-                           gap_tol, dt, v_b, fc):
+                           ref_n, lo_b, hi_b, gap_tol, dt, v_b, fc, status, hold):
     """The projection of the module docstring, in place on v_b (n_nodes, nb, d); the contact
     force m^A (v_new - v_old) / dt is added to fc. mu: (nb, nb) friction coefficients;
-    mode, n_fixed, has_fixed: the normal (see _normal)."""
+    mode, n_fixed, has_fixed: the normal (see _normal); xm_b, rm_b (p2g_positions_bodies)
+    and ref_n, lo_b, hi_b (surface_extents): the gap check between deformable bodies and
+    against rigid bodies; gap_tol >= 1e300 switches it off. status[i, a]: 0 no
+    contact, 1 slip, 2 stick, set by the trial projection (hold=False); with hold=True the
+    re-mapped velocity of MUSL/AVG keeps the contact decided in the step: relative normal
+    velocity = the allowed approach, stuck bodies move with v^cm; other nodes only get the
+    approach cut."""
     n, nb, d = v_b.shape
     vcm = np.empty(d)
     G = np.empty(d)
@@ -275,32 +358,51 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
             dvn = 0.0
             for k in range(d):
                 dvn += (v_b[i, a, k] - vcm[k]) * nrm[k]
-            if dvn <= 0.0:
-                continue
-            if gap_tol < 1e300:                  # bodies still apart at this node: no contact
+            allowed = 0.0                        # approach allowed until the gap closes
+            if gap_tol < 1e300 and rigid[other]:   # exact: the rigid body's particle surface
+                s = 0.0
+                for k in range(d):
+                    s += nrm[k] * ref_n[i, k]
+                gap = lo_b[i, other] - hi_b[i, a] if s >= 0.0 else lo_b[i, a] - hi_b[i, other]
+                allowed = max(gap - gap_tol, 0.0) / dt
+            elif gap_tol < 1e300:                    # deformable bodies still apart: no contact
                 gap = -(rm_b[i, a] / m_b[i, a] + rm_b[i, other] / m_b[i, other])
                 for k in range(d):
                     gap += (xm_b[i, other, k] / m_b[i, other] - xm_b[i, a, k] / m_b[i, a]) * nrm[k]
                 if gap > gap_tol:
                     continue
-            dvt2 = 0.0
+            if hold and status[i, a] > 0:       # in contact: keep it for the whole step
+                dvn -= allowed
+                for k in range(d):
+                    dv = -dvn * nrm[k]
+                    if status[i, a] == 2:
+                        dv = vcm[k] + allowed * nrm[k] - v_b[i, a, k]
+                    fc[i, a, k] += m_b[i, a] * dv / dt
+                    v_b[i, a, k] += dv
+                continue
+            if not hold:
+                status[i, a] = 0
+            if dvn <= allowed:
+                continue
+            if hold:                            # not in contact: only cut the approach
+                for k in range(d):
+                    fc[i, a, k] -= m_b[i, a] * (dvn - allowed) * nrm[k] / dt
+                    v_b[i, a, k] -= (dvn - allowed) * nrm[k]
+                continue
+            dvt2 = 0.0                          # tangential relative velocity
             for k in range(d):
                 t = v_b[i, a, k] - vcm[k] - dvn * nrm[k]
                 dvt2 += t * t
             dvt = np.sqrt(dvt2)
+            imp = dvn - allowed                 # normal impulse per unit mass
             muab = mu[a, other]
-            if dvt <= muab * dvn:
-                for k in range(d):
-                    dv = vcm[k] - v_b[i, a, k]
-                    fc[i, a, k] += m_b[i, a] * dv / dt
-                    v_b[i, a, k] = vcm[k]
-            else:
-                c = muab * dvn / dvt
-                for k in range(d):
-                    t = v_b[i, a, k] - vcm[k] - dvn * nrm[k]
-                    dv = -dvn * nrm[k] - c * t
-                    fc[i, a, k] += m_b[i, a] * dv / dt
-                    v_b[i, a, k] += dv
+            c = 1.0 if dvt <= muab * imp else muab * imp / dvt
+            status[i, a] = 2 if c == 1.0 else 1
+            for k in range(d):                  # stick (c = 1) or Coulomb slip
+                t = v_b[i, a, k] - vcm[k] - dvn * nrm[k]
+                dv = -imp * nrm[k] - c * t
+                fc[i, a, k] += m_b[i, a] * dv / dt
+                v_b[i, a, k] += dv
 
 
 @njit(cache=True)
@@ -394,6 +496,7 @@ class ExplicitContact:
         if gap is not None and not (isinstance(gap, (int, float, np.floating)) and np.isfinite(gap)):
             raise ValueError(f"ExplicitContact: 'gap' must be None or a finite number, got {gap!r}")
         self.gap = None if gap is None else float(gap)
+        self._status = None                  # contact status per node and body (multi-velocity)
         if isinstance(normal, dict):
             self.normal_mode, self.fixed_normals = 2, {int(b): np.asarray(v, dtype=np.float64)
                                                        for b, v in normal.items()}
@@ -521,11 +624,47 @@ class ExplicitContact:
         return v
 
     def _contact(self, sim, v_b, dt, fc, trial):
+        """Contact between bodies, then frictional boundaries, on the nodal velocities v_b:
+        a trial projection decides the contact (trial=True), other velocity fields of the
+        step keep it (the start-of-step one with the last step's decision)."""
         if self.nb > 1 and self.algorithm == "multi-velocity":
+            if self._status is None or self._status.shape != self._m_b.shape:
+                self._status = np.zeros(self._m_b.shape, dtype=np.int8)
             multi_velocity_contact(self._present, self._m_b, self._gm_b, self._is_rigid,
                                    self._mu, self._mode, self._n_fixed, self._has_fixed, self._xm_b,
-                                   self._rm_b, self._gap, dt, v_b, fc)
+                                   self._rm_b, self._ref_n, self._lo_b, self._hi_b, self._gap, dt,
+                                   v_b, fc, self._status, not trial)
         self._friction(sim, v_b, dt, "apply" if trial else "hold")
+
+    def _gap_extents(self, sim, body):
+        """Data of the gap check (module docstring), summed or maximised over ranks: the
+        bodies' mass-weighted positions and particle sizes at every node, and, at nodes
+        shared with a rigid body, the bodies' extents along the node's normal; with gap=None
+        (or penalty contact) none."""
+        grid, nb, p = sim.grid, self.nb, sim.particles
+        nn, d = grid.n_nodes, sim.gdim
+        none = np.zeros((1, nb))
+        self._xm_b, self._rm_b = np.zeros((1, nb, d)), none
+        self._ref_n, self._lo_b, self._hi_b, self._gap = np.zeros((1, d)), none, none, 1e308
+        if self.gap is None or self.algorithm != "multi-velocity":
+            return
+        self._gap = self.gap * grid.h
+        self._xm_b, self._rm_b = np.zeros((nn, nb, d)), np.zeros((nn, nb))
+        p2g_positions_bodies(grid.D, sim.nodes, sim.N, body, p.mass, p.x, p.V, self._xm_b, self._rm_b)
+        self._acc(grid, self._xm_b, self._rm_b)
+        if not self.rigid:
+            return
+        ref_n = np.zeros((nn, d))
+        shared = np.zeros(nn, dtype=np.bool_)
+        reference_normals(self._present, self._is_rigid, self._gm_b, self._mode, self._n_fixed,
+                          self._has_fixed, ref_n, shared)
+        lo, hi = np.full((nn, nb), np.inf), np.full((nn, nb), -np.inf)
+        surface_extents(grid.D, sim.nodes, sim.N, body, p.x, p.V, grid.axisymmetric, grid.node_x,
+                        ref_n, shared, lo, hi)
+        if sim.comm.size > 1:
+            ext = grid.reduce_max(np.hstack([-lo, hi]))
+            lo, hi = -ext[:, :nb], ext[:, nb:]
+        self._ref_n, self._lo_b, self._hi_b = ref_n, lo, hi
 
     def _friction_gaps(self, sim, body):
         """Gaps of every frictional boundary to each deformable body (boundaries.friction);
@@ -577,15 +716,7 @@ class ExplicitContact:
         mv_b = np.zeros((nn, nb, d))
         gm_b = np.zeros((nn, nb, d))
         p2g_bodies(D, sim.nodes, sim.N, sim.dN, body, p.mass, p.v, m_b, mv_b, gm_b)
-        if self.gap is not None and self.algorithm == "multi-velocity":
-            xm_b = np.zeros((nn, nb, d))
-            rm_b = np.zeros((nn, nb))
-            p2g_positions_bodies(D, sim.nodes, sim.N, body, p.mass, p.x, p.V, xm_b, rm_b)
-            self._acc(grid, m_b, mv_b, gm_b, xm_b, rm_b)
-            self._xm_b, self._rm_b, self._gap = xm_b, rm_b, self.gap * grid.h
-        else:
-            self._acc(grid, m_b, mv_b, gm_b)
-            self._xm_b, self._rm_b, self._gap = gm_b, m_b, 1e308
+        self._acc(grid, m_b, mv_b, gm_b)
         m = m_b.sum(axis=1)
         T["p2g"] += time.perf_counter() - t0
         active = sim.active_mask(m)                  # total mass; restricts dN
@@ -596,18 +727,15 @@ class ExplicitContact:
         present = m_b > mtol
         kt.restrict_gradients(D, sim.nodes, sim.N, sim.dN, present, body)   # per body
         self._present, self._m_b, self._gm_b = present, m_b, gm_b
+        self._gap_extents(sim, body)
         t0 = time.perf_counter()
         inv_mb = np.divide(1.0, m_b, out=np.zeros_like(m_b), where=present)
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
         free = ~sim.fixed
         v0 = self._velocities(sim, mv_b, inv_mb, free, sim.t)
         T["solve"] += time.perf_counter() - t0
-        if self.scheme in ("USF", "AVG"):            # the stress sees the held v0
-            v0c = v0
-            if sim.frictions:
-                v0c = v0.copy()
-                self._friction(sim, v0c, dt, "hold")
-            self._stress_update(sim, body, v0c, dt if self.scheme == "USF" else 0.5 * dt)
+        if self.scheme in ("USF", "AVG"):
+            self._stress_update(sim, body, v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f_b = np.zeros((nn, nb, d))
         stress = sim.dynamic_stress(p.stress)
