@@ -734,8 +734,12 @@ class ExplicitContact:
         free = ~sim.fixed
         v0 = self._velocities(sim, mv_b, inv_mb, free, sim.t)
         T["solve"] += time.perf_counter() - t0
-        if self.scheme in ("USF", "AVG"):
-            self._stress_update(sim, body, v0, dt if self.scheme == "USF" else 0.5 * dt)
+        if self.scheme in ("USF", "AVG"):            # the stress sees v0 with the base contact
+            v0c = v0
+            if sim.frictions:
+                v0c = v0.copy()
+                self._friction(sim, v0c, dt, "hold")
+            self._stress_update(sim, body, v0c, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f_b = np.zeros((nn, nb, d))
         stress = sim.dynamic_stress(p.stress)
