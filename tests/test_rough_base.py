@@ -1,62 +1,12 @@
 """Rough (frictional) rigid bases that hold a body at rest (issue 17; boundaries.friction:
 unilateral, gap-consistent contact with Coulomb friction, seed 002 §5.1).
 
-Scene: an elastic block 1 m x 0.5 m (E = 10 MPa, nu = 0.3, rho = 2000) on the base of the
-grid. Static settlement of its centroid on a smooth base (plane strain, free sides):
-rho g H^2 (1 - nu^2) / (3 E) = 0.1488 mm."""
+Scenes and known answers: fenicsmpm.problems.friction (an elastic block 1 m x 0.5 m on a
+rough base, an incline or a rigid body; static settlement 0.1488 mm)."""
 import numpy as np
 import pytest
-from dolfinx import mesh
-from mpi4py import MPI
 
-import fenicsmpm as fm
-
-G, RHO, E, NU, H = 9.81, 2000.0, 10e6, 0.3, 0.5
-STATIC = RHO * G * H ** 2 * (1 - NU ** 2) / (3 * E)
-
-
-def _block(scheme="MUSL", mu=0.5, theta=0.0, geostatic=False, ramp=None, cfl=0.5, h=0.05,
-           inclined_mesh=False, contact=False):
-    """The block on a base inclined by theta (gravity rotated, or the mesh itself rotated with
-    the base normal taken from its facets); returns (sim, boundary, history of the
-    mass-weighted displacement (t, along, normal))."""
-    th = np.radians(theta)
-    msh = mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [3.0, 1.0]], [round(3 / h), round(1 / h)],
-                                mesh.CellType.quadrilateral)
-    rot = np.array([[np.cos(th), np.sin(th)], [-np.sin(th), np.cos(th)]])   # base frame -> mesh
-    if inclined_mesh:
-        msh.geometry.x[:, :2] = msh.geometry.x[:, :2] @ rot.T
-    grid = fm.Grid(msh)
-    mat = fm.LinearElastic(E=E, nu=NU, density=RHO)
-    frame = (lambda x: x @ rot) if inclined_mesh else (lambda x: x)        # mesh -> base frame
-    p = fm.Particles.fill(grid, mat, per_cell=2,
-                          region=lambda x: (np.abs(frame(x)[:, 0] - 1.0) < 0.5) & (frame(x)[:, 1] < H))
-    if geostatic:                                   # equilibrium on the incline, base frame
-        y = frame(p.x)[:, 1]
-        s = np.zeros((len(y), 2, 2))
-        s[:, 1, 1] = -RHO * G * np.cos(th) * (H - y)
-        s[:, 0, 0] = NU / (1 - NU) * s[:, 1, 1]
-        s[:, 0, 1] = s[:, 1, 0] = RHO * G * np.sin(th) * (H - y)
-        R = rot if inclined_mesh else np.eye(2)
-        p.stress[:, :2, :2] = R @ s @ R.T
-        p.stress[:, 2, 2] = s[:, 0, 0]
-    gravity = (0.0, -G) if inclined_mesh else (G * np.sin(th), -G * np.cos(th))
-    integrator = fm.Explicit(scheme)
-    if contact:                                     # two bodies side by side, each on the base
-        fm.set_body(p, 1, region=lambda x: frame(x)[:, 0] > 1.0)
-        integrator = fm.ExplicitContact(scheme, mu=0.5)
-    sim = fm.Simulation(grid, p, integrator, dt="auto", cfl=cfl, gravity=gravity,
-                        gravity_ramp=ramp)
-    if inclined_mesh:
-        base = sim.add_friction(lambda x: np.abs(frame(x)[:, 1]) < 1e-9, mu)      # normal from facets
-    else:
-        base = sim.add_friction(lambda x: np.isclose(x[:, 1], 0.0), mu, normal=(0.0, -1.0))
-    m0 = p.total(p.mass)
-    c0 = np.array([p.total(p.mass * frame(p.x)[:, k]) for k in range(2)]) / m0
-    hist = []
-    sim.observe(lambda s: hist.append([s.t] + [p.total(p.mass * frame(p.x)[:, k]) / m0 - c0[k]
-                                               for k in range(2)]), every=5)
-    return sim, base, hist
+from fenicsmpm.problems.friction import G, STATIC, block_on_base, block_on_rigid_body
 
 
 @pytest.mark.parametrize("scheme,cfl,mu", [("USF", 0.5, 0.5), ("USL", 0.5, 0.5), ("MUSL", 0.5, 0.5),
@@ -72,7 +22,7 @@ def test_block_rests_on_rough_base(scheme, cfl, mu):
     (1.4-1.8 %); USL dissipates 35 % on a roller or fixed base as well (measured -35.1 %
     here, -34.6 % on a roller). USL at cfl 0.9 inverts particles on a roller base too (an
     instability of USL, not of the base): not run."""
-    sim, base, hist = _block(scheme, mu=mu, cfl=cfl, h=0.1)
+    sim, base, hist = block_on_base(scheme, mu=mu, cfl=cfl, h=0.1)
     sim.monitor_energy(every=50, tolerance=1.0)
     sim.run(t_end=2.0)
     h = np.array(hist)
@@ -93,7 +43,7 @@ def test_block_rests_on_rough_base(scheme, cfl, mu):
 def test_reaction_carries_the_weight():
     """The mean normal reaction over the last second equals the weight (within 1 %; measured
     -0.05 %) and the tangential one vanishes on a flat base."""
-    sim, base, _ = _block("MUSL", mu=0.5, h=0.1)
+    sim, base, _ = block_on_base("MUSL", mu=0.5, h=0.1)
     r = []
     sim.observe(lambda s: r.append(base.reaction()) if s.t > 1.0 else None)
     sim.run(t_end=2.0)
@@ -112,7 +62,7 @@ def test_block_on_30_degree_incline(mu, start, inclined_mesh):
     state and from rest with a 0.2 s gravity ramp; mu = 0.3 slides with
     a = g (sin - mu cos) within 2 %, mu = 0 within 0.5 % (measured +0.08 % for both)."""
     th = np.radians(30.0)
-    sim, base, hist = _block("MUSL", mu=mu, theta=30.0, geostatic=start == "geostatic",
+    sim, base, hist = block_on_base("MUSL", mu=mu, theta=30.0, geostatic=start == "geostatic",
                              ramp=0.2 if start == "ramp" else None, inclined_mesh=inclined_mesh)
     sim.run(t_end=0.5)
     t, along = hist[-1][0], hist[-1][1]
@@ -131,7 +81,7 @@ def test_rough_base_under_explicit_contact(theta, mu):
     """The same block as two bodies (fm.ExplicitContact, multi-velocity, mu = 0.5 between
     them): each body's field has its own contact status on the base. Flat base: no climb,
     static settlement within 10 %; 30 deg: mu = 0.7 sticks, mu = 0.3 slides within 2 %."""
-    sim, base, hist = _block("MUSL", mu=mu, theta=theta, geostatic=theta > 0, contact=True)
+    sim, base, hist = block_on_base("MUSL", mu=mu, theta=theta, geostatic=theta > 0, contact=True)
     sim.run(t_end=1.0 if theta == 0 else 0.5)
     h = np.array(hist)
     if theta == 0:
@@ -148,35 +98,6 @@ def test_rough_base_under_explicit_contact(theta, mu):
         assert abs(along - 0.5 * a * t ** 2) < 0.02 * 0.5 * a * t ** 2, (along, 0.5 * a * t ** 2)
 
 
-def _block_on_rigid_body(mu, theta=30.0, h=0.05, t_end=0.5):
-    """The block (body 0, geostatic) on a rigid body (body 1, held at rest, its face on the
-    grid line y = 0.25, prescribed outward normal (0, 1)); gravity rotated by theta. Returns
-    the history (t, along, normal) of the block's mass-weighted displacement."""
-    th, y0 = np.radians(theta), 0.25
-    msh = mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [3.0, 1.0]], [round(3 / h), round(1 / h)],
-                                mesh.CellType.quadrilateral)
-    grid = fm.Grid(msh)
-    p = fm.Particles.fill(grid, fm.LinearElastic(E=E, nu=NU, density=RHO), per_cell=2,
-                          region=lambda x: ((np.abs(x[:, 0] - 1.0) < 0.5) & (x[:, 1] < y0 + H))
-                          | (x[:, 1] < y0))
-    body = fm.set_body(p, 1, region=lambda x: x[:, 1] < y0)
-    blk = body == 0
-    depth = y0 + H - p.x[blk, 1]
-    p.stress[blk, 1, 1] = -RHO * G * np.cos(th) * depth
-    p.stress[blk, 0, 0] = p.stress[blk, 2, 2] = NU / (1 - NU) * p.stress[blk, 1, 1]
-    p.stress[blk, 0, 1] = p.stress[blk, 1, 0] = RHO * G * np.sin(th) * depth
-    integ = fm.ExplicitContact("MUSL", mu=mu, rigid={1: (0.0, 0.0)}, normal={1: (0.0, 1.0)})
-    sim = fm.Simulation(grid, p, integ, dt="auto", gravity=(G * np.sin(th), -G * np.cos(th)))
-    sel = lambda: p.body == 0
-    m0 = p.total(p.mass * sel())
-    c0 = np.array([p.total(p.mass * sel() * p.x[:, k]) for k in range(2)]) / m0
-    hist = []
-    sim.observe(lambda s: hist.append([s.t] + [p.total(p.mass * sel() * p.x[:, k]) / m0 - c0[k]
-                                               for k in range(2)]), every=5)
-    sim.run(t_end=t_end)
-    return np.array(hist)
-
-
 @pytest.mark.parametrize("mu", [0.7, 0.3, 0.0])
 def test_block_on_rigid_incline_body(mu):
     """The incline as a rigid body (multi-velocity contact, exact gap against the rigid
@@ -184,7 +105,9 @@ def test_block_on_rigid_incline_body(mu):
     sticks (measured 0.55 mm, < 0.5 % of the frictionless 613 mm; before: 156 mm) and does
     not sink (measured 0.03 mm; before: 24 mm); mu = 0.3 within 2 % of a t^2 / 2 (measured
     -0.02 %; before +10 %), mu = 0 within 0.5 % (measured -0.04 %)."""
-    h = _block_on_rigid_body(mu)
+    sim, hist = block_on_rigid_body(mu)
+    sim.run(t_end=0.5)
+    h = np.array(hist)
     th = np.radians(30.0)
     t, along = h[-1, 0], h[-1, 1]
     a = G * (np.sin(th) - mu * np.cos(th))
