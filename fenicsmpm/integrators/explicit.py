@@ -2,7 +2,7 @@
 
 Grid momentum balance on active nodes (seed 002 §2.4, lumped mass):
     v_i^n = (m v)_i / m_i,   v_i^{n+1} = v_i^n + dt f_i / m_i,
-particles: x_p += dt sum N v^{n+1}, v_p by the FLIP/PIC blend, and the stress from
+particles: x_p += dt sum N v^{n+1}, v_p by the velocity transfer, and the stress from
 dF = I + dt L with L = sum v_i (x) grad N_i, taken from
     USF:  v^n            before the forces (stress updated first),
     USL:  v^{n+1}        after the grid update,
@@ -10,7 +10,15 @@ dF = I + dt L with L = sum v_i (x) grad N_i, taken from
     AVG:  half steps: dt/2 with v^n before the forces, dt/2 with the re-mapped v^{n+1}
           after them (seed 002 §4.4, "combining the two formulations", steps 1-8).
 Nodes with a mass below the simulation's mass tolerance are inactive: zero velocity,
-no division by their mass."""
+no division by their mass.
+
+Velocity transfer (`transfer`):
+    "flip": v_p += sum N (v^{n+1} - v^n) blended with PIC by `flip` (1: FLIP, 0: PIC);
+    "apic": the affine particle-in-cell transfer (Jiang et al. 2015; kernels.transfer
+            p2g_affine/g2p_affine): each particle carries C_p = sum v_i (x) grad N_ip and
+            gives the nodes m_p (v_p + C_p (x_i - x_p)), so an affine velocity field (a rigid
+            rotation) is transferred exactly; per-particle field `apic_C` (migrates, and is
+            checkpointed)."""
 import time
 
 import numpy as np
@@ -18,6 +26,7 @@ import numpy as np
 from ..kernels import transfer as kt
 
 SCHEMES = ("USF", "USL", "MUSL", "AVG")
+TRANSFERS = ("apic", "flip")
 
 
 class Explicit:
@@ -25,16 +34,41 @@ class Explicit:
     records_work = True
     supports_friction = True
 
-    def __init__(self, scheme="MUSL", flip=1.0):
+    def __init__(self, scheme="MUSL", flip=None, transfer=None):
+        """scheme: one of SCHEMES; transfer: "apic" or "flip" (default: "flip" when `flip` is
+        given, else "flip"); flip: the FLIP fraction of transfer="flip" (default 1)."""
         scheme = str(scheme).upper()
         if scheme not in SCHEMES:
             raise ValueError(f"Explicit: 'scheme' must be one of {SCHEMES}, got {scheme!r}")
-        if not (0.0 <= flip <= 1.0):
+        if transfer is None:
+            transfer = "flip"
+        if transfer not in TRANSFERS:
+            raise ValueError(f"Explicit: 'transfer' must be one of {TRANSFERS}, got {transfer!r}")
+        if flip is not None and transfer != "flip":
+            raise ValueError(f"Explicit: 'flip' applies to transfer='flip' only, got "
+                             f"transfer={transfer!r} and flip={flip!r}")
+        flip = 1.0 if flip is None else flip
+        if not (isinstance(flip, (int, float, np.floating)) and 0.0 <= flip <= 1.0):
             raise ValueError(f"Explicit: 'flip' must be in [0, 1], got {flip!r}")
-        self.scheme, self.flip = scheme, float(flip)
+        self.scheme, self.flip, self.transfer = scheme, float(flip), transfer
 
     def setup(self, sim):
-        pass
+        if self.transfer == "apic":
+            sim.particles.add_field("apic_C", (sim.gdim, sim.gdim))
+
+    def _p2g(self, sim, v, x, with_mass):
+        """Nodal mass (with_mass) and momentum of particle velocities v at positions x, local
+        (not yet summed over ranks): plain or affine (APIC) by `transfer`."""
+        g, p = sim.grid, sim.particles
+        m = np.zeros(g.n_nodes) if with_mass else np.zeros(1)
+        mv = np.zeros((g.n_nodes, g.gdim))
+        if self.transfer == "apic":
+            kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, v, p.apic_C, x, g.node_x, with_mass, m, mv)
+        elif with_mass:
+            kt.p2g_mass_momentum(g.D, sim.nodes, sim.N, p.mass, v, m, mv)
+        else:
+            kt.p2g_weighted(g.D, sim.nodes, sim.N, p.mass, v, mv)
+        return m, mv
 
     def _grid_velocity(self, momentum, inv_m, free):
         """v_i = (m v)_i / m_i on active nodes, 0 on inactive nodes and fixed components."""
@@ -65,7 +99,7 @@ class Explicit:
         sim.locate_and_shape()
         t0 = time.perf_counter()
         self._gaps = [b.gaps(sim) for b in sim.frictions]
-        m, mv = sim.nodal_mass_momentum()
+        m, mv = self._p2g(sim, p.v, p.x, True)
         grid.accumulate(m, mv)
         T["p2g"] += time.perf_counter() - t0
         active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
@@ -96,13 +130,17 @@ class Explicit:
             fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
-        kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
+        x_start = p.x.copy() if self.transfer == "apic" and self.scheme in ("MUSL", "AVG") else p.x
+        if self.transfer == "apic":
+            kt.g2p_affine(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v1, p.x, p.v, p.u, p.apic_C)
+        else:
+            kt.g2p(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
         if self.scheme in ("MUSL", "AVG"):
-            mv2 = sim.nodal_weighted(p.v)
+            _, mv2 = self._p2g(sim, p.v, x_start, False)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
             self._hold(sim, v1, dt)

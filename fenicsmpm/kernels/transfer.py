@@ -158,6 +158,78 @@ def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
 
 
 @njit(cache=True)
+def p2g_affine(D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out):
+    """APIC momentum (Jiang et al. 2015, eq 10 with C_p in place of B_p D_p^-1):
+        (m v)_i += sum_p N_ip m_p (v_p + C_p (x_i - x_p)),   m_i += sum_p N_ip m_p (with_mass).
+    With C_p the velocity gradient of the last G2P (g2p_affine) an affine velocity field is
+    carried to the nodes exactly (partition of unity and linear reproduction)."""
+    d = len(D)
+    for p in range(nodes.shape[0]):
+        mp = mass[p]
+        for a in range(nodes.shape[1]):
+            w = N[p, a] * mp
+            i = nodes[p, a]
+            if with_mass:
+                m_out[i] += w
+            for k in range(d):
+                s = v[p, k]
+                for l in range(d):
+                    s += C[p, k, l] * (node_x[i, l] - x[p, l])
+                mv_out[i, k] += w * s
+
+
+@njit(cache=True)
+def g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C):
+    """APIC particle update (Jiang et al. 2015, eqs 8-9): v_p = sum N v_i (PIC) and
+        C_p = B_p D_p^-1,  B_p = sum_i N_ip v_i (x_i - x_p)^T,  D_p = sum_i N_ip (x_i - x_p)(x_i - x_p)^T,
+    with x_p the start-of-step position (angular momentum is conserved exactly); where D_p is
+    singular (a particle on a node of a multilinear cell) C_p = sum v_i (x) grad N_ip.
+    Then x_p += sum N du_i."""
+    d = len(D)
+    B = np.zeros((d, d))
+    Dm = np.zeros((d, d))
+    for p in range(nodes.shape[0]):
+        B[:] = 0.0
+        Dm[:] = 0.0
+        for a in range(nodes.shape[1]):
+            i = nodes[p, a]
+            w = N[p, a]
+            for k in range(d):
+                rk = node_x[i, k] - x[p, k]
+                for l in range(d):
+                    rl = node_x[i, l] - x[p, l]
+                    B[k, l] += w * v_new[i, k] * rl
+                    Dm[k, l] += w * rk * rl
+        det = Dm[0, 0] * Dm[1, 1] - Dm[0, 1] * Dm[1, 0] if d == 2 else np.linalg.det(Dm)
+        scale = Dm[0, 0] + Dm[d - 1, d - 1]
+        if abs(det) > 1e-8 * scale ** d:
+            Dinv = np.linalg.inv(Dm)
+            for k in range(d):
+                for l in range(d):
+                    c = 0.0
+                    for j in range(d):
+                        c += B[k, j] * Dinv[j, l]
+                    C[p, k, l] = c
+        else:
+            for k in range(d):
+                for l in range(d):
+                    c = 0.0
+                    for a in range(nodes.shape[1]):
+                        c += v_new[nodes[p, a], k] * dN[p, a, l]
+                    C[p, k, l] = c
+        for k in range(d):
+            dx = 0.0
+            vp = 0.0
+            for a in range(nodes.shape[1]):
+                i = nodes[p, a]
+                dx += N[p, a] * du[i, k]
+                vp += N[p, a] * v_new[i, k]
+            x[p, k] += dx
+            u[p, k] += dx
+            v[p, k] = vp
+
+
+@njit(cache=True)
 def commit_step(dF, F, V, sigma, sigma_new, work, inverted):
     """Accept a step for every particle, in one pass: work += trapezoidal stress work,
     V <- det(dF) V, F <- dF F, sigma <- sigma_new. A particle whose increment inverts it
