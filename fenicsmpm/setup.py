@@ -114,8 +114,11 @@ class SetupMixin:
         """Periodic sides normal to `axis` (boundaries.periodic): the node pairs at equal
         position on the two faces are tied (masses, momenta, forces summed; one solution, in
         explicit and implicit runs). With on_leave="periodic" a particle leaving through one
-        face re-enters through the other. shape="mpm" only. Returns the PeriodicTie."""
+        face re-enters through the other. shape="mpm" only (with shape="auto" the simulation
+        switches to it, logged). Returns the PeriodicTie."""
         from .boundaries.periodic import PeriodicTie
+        if self.shape != "mpm" and self.shape_auto and self.step_count == 0:
+            self._use_standard_shape("periodic sides support the standard family only")
         if self.shape != "mpm":
             raise NotImplementedError(f"set_periodic: shape={self.shape!r}; periodic sides "
                                       f"support shape='mpm' only")
@@ -195,6 +198,14 @@ class SetupMixin:
         return pr
 
 
+    def _use_standard_shape(self, reason):
+        """shape="auto" falls back to the standard family before the first step (logged)."""
+        import logging
+        self.shape, self.shape_reason, self._wide = "mpm", reason, None
+        self._n_alloc = -1
+        if self.comm.rank == 0:
+            logging.getLogger("fenicsmpm").info("shape='auto': mpm (%s)", reason)
+
     def _check_options(self, on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp, force_integration):
         """Check and store the options of Simulation() (see there)."""
         if on_leave not in LEAVE_POLICIES:
@@ -211,10 +222,11 @@ class SetupMixin:
         if force_integration not in FORCE_INTEGRATIONS:
             raise ValueError(f"Simulation: 'force_integration' must be one of {FORCE_INTEGRATIONS}, "
                              f"got {force_integration!r}")
-        if force_integration == "mixed" and shape != "mpm":
+        if force_integration == "mixed" and shape not in ("mpm", "auto"):
             raise NotImplementedError(f"Simulation: force_integration='mixed' needs shape='mpm', got {shape!r}")
         self.force_integration = force_integration
-        if self.axisymmetric and (shape not in ("mpm", "ugimp", "cpgimp") or force_integration != "particles"):
+        if self.axisymmetric and (shape not in ("auto", "mpm", "ugimp", "cpgimp")
+                                  or force_integration != "particles"):
             raise NotImplementedError(f"Simulation: axisymmetric grids support shape 'mpm', 'ugimp' "
                                       f"and 'cpgimp' with particle integration, got shape={shape!r}, "
                                       f"force_integration={force_integration!r}")

@@ -20,7 +20,7 @@ from .kernels import axisymmetric as axi
 from .kernels import transfer as kt
 from .kernels.smoothing import smoothed_stress
 from .setup import SetupMixin
-from .shapes import standard as ks, wide_shape
+from .shapes import resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
 
@@ -43,7 +43,10 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     stress_feedback: None, or "smoothed": explicit runs compute the internal force from the
     grid-smoothed stress (fenicsmpm.kernels.smoothing, seed 002 eqs 4.18-4.19) instead of the
     particle stress; the constitutive update still acts on the particle stress.
-    shape: the shape-function family, one of SHAPES: "mpm" (the Lagrange basis of the
+    shape: the shape-function family, one of SHAPES: "auto" (shapes.choose_shape: the most
+    accurate family the mesh and options support, cpGIMP on structured grids, CPDI2 on other
+    2D meshes, else "mpm"; the choice and its reason are `shape` and `shape_reason`, and are
+    logged on rank 0), "mpm" (the Lagrange basis of the
     particle's cell), "ugimp"/"cpgimp" (shapes.gimp: structured quadrilateral/hexahedral
     grids), "cpdi1"/"cpdi2" (shapes.cpdi: any 2D P1/Q1 mesh), "gauss" (shapes.gauss_gimp:
     deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
@@ -113,8 +116,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self._n_alloc = -1
         self._all = np.zeros(0, dtype=np.int64)
         self._inverted = np.zeros(0, dtype=np.int8)  # flagged by commit, reported by the guards
-        self.shape = shape
-        self._wide = wide_shape(self, shape)             # GIMP/CPDI evaluator; None for "mpm"
+        self.shape_auto = shape == "auto"
+        self.shape, self.shape_reason = resolve_shape(self, shape)
+        self._wide = wide_shape(self, self.shape)        # GIMP/CPDI evaluator; None for "mpm"
         integrator.setup(self)
 
     @property

@@ -2,7 +2,52 @@
 cell, Simulation(shape="mpm")), gimp ("ugimp"/"cpgimp"), cpdi ("cpdi1"/"cpdi2"), gauss_gimp
 ("gauss") and cmpm (the composite basis of the DM-GC integrators)."""
 
-SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss")
+import logging
+
+SHAPES = ("auto", "mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss")
+_log = logging.getLogger("fenicsmpm")
+
+
+def choose_shape(sim):
+    """The family shape="auto" picks for `sim`, and why: (family, reason).
+
+    The most accurate family the mesh supports, by measurement (bench techniques, mms,
+    column-peers; issue 15): cpGIMP on structured axis-aligned quadrilateral/hexahedral
+    grids, CPDI2 on other 2D meshes (triangles, unstructured quadrilaterals). The standard
+    family where a wide one is not available: implicit integrators (the wide-stencil implicit
+    assembly is several times slower), force_integration="mixed", 3D unstructured meshes (no
+    tetrahedral CPDI yet) and, under MPI, meshes without the vertex ghost layer (create them
+    with partitioner=fenicsmpm.grid.vertex_ghost_partitioner()). Collective."""
+    from .gimp import lattice
+    grid = sim.grid
+    if not sim.integrator.explicit:
+        return "mpm", "implicit integrator (the wide-stencil implicit assembly is several times slower)"
+    if sim.force_integration != "particles":
+        return "mpm", f"force_integration={sim.force_integration!r} needs the standard family"
+    if not grid.has_vertex_ring():
+        return "mpm", ("the MPI mesh has no vertex ghost layer (create it with "
+                       "partitioner=fenicsmpm.grid.vertex_ghost_partitioner())")
+    try:
+        lattice(grid)
+        return "cpgimp", "structured axis-aligned grid"
+    except ValueError:
+        pass
+    if grid.axisymmetric:
+        return "mpm", "axisymmetric grid that is not a structured lattice"
+    if grid.gdim == 2:
+        return "cpdi2", "2D mesh that is not a structured lattice"
+    return "mpm", "3D mesh that is not a structured lattice (no tetrahedral CPDI yet)"
+
+
+def resolve_shape(sim, shape):
+    """The family to use for the Simulation option `shape` ("auto" -> choose_shape, logged
+    once on rank 0 with its reason), and the reason ("" when asked for by name)."""
+    if shape != "auto":
+        return shape, ""
+    family, reason = choose_shape(sim)
+    if sim.comm.rank == 0:
+        _log.info("shape='auto': %s (%s)", family, reason)
+    return family, reason
 
 
 def wide_shape(sim, shape):
