@@ -118,3 +118,15 @@ def test_block_on_rigid_incline_body(mu):
     else:
         exact = 0.5 * a * t ** 2
         assert abs(along - exact) < (0.005 if mu == 0 else 0.02) * exact, (along, exact)
+
+
+@pytest.mark.parametrize("shape", ["cpgimp", "auto"])
+def test_block_rests_on_rough_base_with_wide_shapes(shape):
+    """The rest test with cpGIMP (and shape='auto'), MUSL, mu = 0.5, h = 0.1, 2 s: no climb
+    (measured -0.023 mm), settlement between no-slip and free slip (measured 0.920 STATIC)."""
+    sim, base, hist = block_on_base("MUSL", mu=0.5, h=0.1, shape=shape)
+    sim.run(t_end=2.0)
+    h = np.array(hist)
+    assert h[:, 2].max() < 0.05e-3, h[:, 2].max()
+    late = -h[:, 2][h[:, 0] > 1.0].mean()
+    assert 0.85 * STATIC < late < 1.02 * STATIC, (late, STATIC)

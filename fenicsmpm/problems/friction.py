@@ -31,7 +31,7 @@ def _geostatic(p, sel, depth, th, R):
 
 
 def block_on_base(scheme="MUSL", mu=0.5, theta=0.0, geostatic=False, ramp=None, cfl=0.5, h=0.05,
-                  inclined_mesh=False, contact=False, comm=None):
+                  inclined_mesh=False, contact=False, shape="mpm", comm=None):
     """The block on a frictional base `sim.add_friction` inclined by theta: gravity rotated,
     or with inclined_mesh the mesh rotated and the base normal taken from its facets; with
     `contact` the block is two bodies side by side (fm.ExplicitContact, mu 0.5 between them).
@@ -58,7 +58,8 @@ def block_on_base(scheme="MUSL", mu=0.5, theta=0.0, geostatic=False, ramp=None, 
     if contact:
         fm.set_body(p, 1, region=lambda x: frame(x)[:, 0] > 1.0)
         integrator = fm.ExplicitContact(scheme, mu=0.5)
-    sim = fm.Simulation(grid, p, integrator, dt="auto", cfl=cfl, gravity=gravity, gravity_ramp=ramp)
+    sim = fm.Simulation(grid, p, integrator, dt="auto", cfl=cfl, gravity=gravity, gravity_ramp=ramp,
+                        shape=shape)
     if inclined_mesh:
         base = sim.add_friction(lambda x: np.abs(frame(x)[:, 1]) < 1e-9, mu)
     else:
