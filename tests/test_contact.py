@@ -158,3 +158,22 @@ def test_rigid_pusher_moves_with_prescribed_velocity():
     assert err < 1e-12, err
     assert back - face > -0.05, (back, face)
     assert vb > 0.45, vb
+
+
+def test_contact_keeps_rollers():
+    """A rigid body pushed diagonally onto a block with a roller (u_x = 0) on x = 0, mu = 0.5:
+    the contact projection must not give the block's nodes on the roller an x-velocity (issue
+    21: it did, up to 0.064 m/s in the footing scene)."""
+    grid = _grid(1.0, 1.0, 10)
+    mat = fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)
+    p = fm.Particles.fill(grid, mat, per_cell=2, region=lambda x: x[:, 1] < 0.7)
+    fm.set_body(p, 1, region=lambda x: (x[:, 1] > 0.5) & (x[:, 0] < 0.4))
+    integ = fm.ExplicitContact("MUSL", mu=0.5, rigid={1: (-0.05, -0.05)})
+    sim = fm.Simulation(grid, p, integ, dt="auto")
+    roller = np.isclose(grid.node_x[:, 0], 0.0)
+    sim.fix(lambda x: np.isclose(x[:, 0], 0.0), [0])
+    sim.fix(lambda x: np.isclose(x[:, 1], 0.0), [1])
+    worst = []
+    sim.observe(lambda s: worst.append(np.abs(s.nodal["body_velocity"][roller, 0, 0]).max(initial=0.0)))
+    sim.run(t_end=0.02)
+    assert max(worst) == 0.0, max(worst)

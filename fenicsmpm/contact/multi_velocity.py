@@ -625,8 +625,9 @@ class ExplicitContact:
 
     def _contact(self, sim, v_b, dt, fc, trial):
         """Contact between bodies, then frictional boundaries, on the nodal velocities v_b:
-        a trial projection decides the contact (trial=True), other velocity fields of the
-        step keep it (the start-of-step one with the last step's decision)."""
+        a trial projection decides the contact (trial=True), the re-mapped velocity keeps it;
+        then the Dirichlet conditions (sim.fix) again on the deformable bodies, so a contact
+        projection never moves a fixed component (a roller on a symmetry line)."""
         if self.nb > 1 and self.algorithm == "multi-velocity":
             if self._status is None or self._status.shape != self._m_b.shape:
                 self._status = np.zeros(self._m_b.shape, dtype=np.int8)
@@ -635,6 +636,11 @@ class ExplicitContact:
                                    self._rm_b, self._ref_n, self._lo_b, self._hi_b, self._gap, dt,
                                    v_b, fc, self._status, not trial)
         self._friction(sim, v_b, dt, "apply" if trial else "hold")
+        if sim.fixed.any():
+            free = ~sim.fixed
+            for b in range(self.nb):
+                if not self._is_rigid[b]:
+                    v_b[:, b, :] *= free
 
     def _gap_extents(self, sim, body):
         """Data of the gap check (module docstring), summed or maximised over ranks: the

@@ -76,9 +76,11 @@ class Explicit:
 
     def _contact(self, sim, v, dt, mass):
         """Frictional boundaries project the trial nodal velocities v in place for the gaps of
-        the start of the step and decide the contact (boundaries.friction)."""
+        the start of the step and decide the contact (boundaries.friction); the Dirichlet
+        conditions (sim.fix) hold after it."""
         for b, g in zip(sim.frictions, self._gaps):
             b.apply(v, g, dt, mass)
+        v *= ~sim.fixed
 
     def _hold(self, sim, v, dt):
         """A velocity the stress update sees keeps the contact the trial projection decided
