@@ -54,53 +54,41 @@ def node_gaps(D, nodes, N, x, V, axis_r, base_index, base_x, normals, gap):
 
 
 @njit(cache=True)
-def coulomb_project(nodes, normals, gap, dt, mu, v, status):
-    """Apply the projection of the module docstring in place to v[nodes]; status[k] is set to
-    0 (no contact), 1 (slip) or 2 (stick)."""
+def coulomb_project(nodes, normals, gap, dt, mu, v, status, decide):
+    """Apply the projection of the module docstring in place to v[nodes].
+
+    decide=True (the trial velocity): contact is decided and status[k] set to 0 (no
+    contact), 1 (slip) or 2 (stick). decide=False (a velocity field the stress update sees
+    after that, the start-of-step or the re-mapped one): nodes in contact keep the normal
+    velocity of the contact, v_n = max(g, 0) / dt, stuck ones also v_t = 0, other nodes only
+    get v_n <= max(g, 0) / dt; so the strain sees the material on the base exactly where the
+    momentum was."""
     d = v.shape[1]
     for k in range(nodes.shape[0]):
         i = nodes[k]
-        status[k] = 0
+        if decide:
+            status[k] = 0
         if gap[k] >= _FAR:
             continue
         allowed = max(gap[k], 0.0) / dt
         vn = 0.0
         for c in range(d):
             vn += v[i, c] * normals[k, c]
-        if vn <= allowed:
+        if (decide or status[k] == 0) and vn <= allowed:
             continue
-        dvn = vn - allowed
-        vt2 = 0.0
-        for c in range(d):
-            t = v[i, c] - vn * normals[k, c]
-            vt2 += t * t
-        vt = np.sqrt(vt2)
-        scale = 0.0 if vt <= mu * dvn else 1.0 - mu * dvn / vt
-        status[k] = 2 if scale == 0.0 else 1
+        if decide:
+            dvn = vn - allowed
+            vt2 = 0.0
+            for c in range(d):
+                t = v[i, c] - vn * normals[k, c]
+                vt2 += t * t
+            vt = np.sqrt(vt2)
+            scale = 0.0 if vt <= mu * dvn else 1.0 - mu * dvn / vt
+            status[k] = 2 if scale == 0.0 else 1
+        else:
+            scale = 0.0 if status[k] == 2 else 1.0
         for c in range(d):
             v[i, c] = allowed * normals[k, c] + scale * (v[i, c] - vn * normals[k, c])
-
-
-@njit(cache=True)
-def hold_contact(nodes, normals, gap, dt, status, v):
-    """For a velocity field the stress update sees after the step's contact was decided
-    (status from coulomb_project): nodes in contact keep the normal velocity of the contact,
-    v_n = max(g, 0) / dt, stuck ones also v_t = 0; other nodes only get v_n <= max(g, 0) / dt.
-    So the strain sees the material stay on the base exactly where the momentum did."""
-    d = v.shape[1]
-    for k in range(nodes.shape[0]):
-        i = nodes[k]
-        if gap[k] >= _FAR:
-            continue
-        allowed = max(gap[k], 0.0) / dt
-        vn = 0.0
-        for c in range(d):
-            vn += v[i, c] * normals[k, c]
-        if status[k] == 0 and vn <= allowed:
-            continue
-        keep = 0.0 if status[k] == 2 else 1.0
-        for c in range(d):
-            v[i, c] = allowed * normals[k, c] + keep * (v[i, c] - vn * normals[k, c])
 
 
 def facet_normals(grid, where, owner):
@@ -199,15 +187,16 @@ class FrictionalBoundary:
         (added to the kept one with `add`, for the bodies of a multi-body run)."""
         before = v[self.nodes].copy()
         coulomb_project(self.nodes, self.normals, gap, dt, self.mu, v,
-                        self.status if status is None else status)
+                        self.status if status is None else status, True)
         dv = (before - v[self.nodes])[self._owned]
         f = (mass[self.nodes][self._owned, None] * dv).sum(axis=0) / dt
         self._force = self._force + f if add else f
 
     def hold(self, v, gap, dt, status=None):
         """Constrain a velocity field the stress update sees (the start-of-step or the
-        re-mapped one) in place, consistently with the last `apply` (hold_contact)."""
-        hold_contact(self.nodes, self.normals, gap, dt, self.status if status is None else status, v)
+        re-mapped one) in place, consistently with the last `apply` (coulomb_project)."""
+        coulomb_project(self.nodes, self.normals, gap, dt, self.mu, v,
+                        self.status if status is None else status, False)
 
     def reaction(self):
         """Force the material exerted on the boundary in the last step (sum over ranks:
