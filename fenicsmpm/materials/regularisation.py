@@ -150,11 +150,13 @@ def regularise(sim):
     comm, grid = sim.comm, sim.grid
     origin = getattr(sim, "_nonlocal_origin", None)
     if origin is None:
-        lo = grid.node_x.min(axis=0) if grid.n_nodes else np.full(grid.gdim, np.inf)
+        lo = np.ascontiguousarray(grid.node_x.min(axis=0) if grid.n_nodes
+                                  else np.full(grid.gdim, np.inf), dtype=np.float64)
+        origin = lo.copy()
         if comm.size > 1:
             from mpi4py import MPI
-            lo = comm.allreduce(lo, op=MPI.MIN)
-        origin = sim._nonlocal_origin = np.ascontiguousarray(lo, dtype=np.float64)
+            comm.Allreduce(lo, origin, op=MPI.MIN)
+        sim._nonlocal_origin = origin
     groups = dict((id(m), idx) for m, idx in sim.material_groups())
     for mat in mats:
         idx = groups.get(id(mat), np.zeros(0, dtype=np.int64))

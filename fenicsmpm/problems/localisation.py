@@ -81,7 +81,8 @@ def shear_layer(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006, 
     is 1D, tau(y) = tau.  Imperfection: the particles within 0.01 m of mid-height start with
     eps_p = `weak`.  Returns u (top displacement), tau (mean sigma_xy), the final eps_p
     profile (y, eps_p), the band width w (module docstring, L = width), Newton iterations,
-    completed/stop message, time split (step wall, nonlocal), ids, state and stress."""
+    completed/stop message, time split (step wall, nonlocal), ids, state, stress and initial
+    positions x0 of the local particles."""
     sim = shear_layer_simulation(h, length, comm, height, width, u_end, steps, m, weak, material)
     comm, qs = sim.comm, sim.integrator
     p = sim.particles
@@ -106,7 +107,7 @@ def shear_layer(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006, 
                 newton=list(qs.iterations), wall_s=wall,
                 nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
                 n_particles=_gsum(comm, len(p)), ids=p.id.copy(), state=p.state.copy(),
-                stress=p.stress.copy())
+                stress=p.stress.copy(), x0=p.x - p.u)
 
 
 
