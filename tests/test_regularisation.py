@@ -81,6 +81,34 @@ def test_mohr_coulomb_without_softening_is_unchanged():
         assert np.allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(a).max())
 
 
+@pytest.mark.parametrize("name", ["VonMises", "MohrCoulomb"])
+def test_nonlocal_strength_at_step_start_is_that_of_A(name):
+    """With kappa_bar = A at the start of a step the yield surface is the local one at
+    kappa = A: the same trial stresses yield (random increments, A in the softening range)."""
+    rng = np.random.default_rng(2)
+    n = 400
+    if name == "VonMises":
+        kw, a = dict(W5_SOIL), rng.uniform(0.0, 0.04, n)
+    else:
+        kw, a = dict(E=20e6, nu=0.3, density=2000.0, phi=30.0, c=5e3, phi_res=20.0, c_res=1e3,
+                     eta=20.0), rng.uniform(0.0, 0.1, n)
+    cls = getattr(fm, name)
+    loc, nl = cls(**kw), cls(**kw, nonlocal_length=0.1)
+    dF = np.eye(3) + 2e-3 * rng.standard_normal((n, 3, 3))
+    dF[:, 2, :] = dF[:, :, 2] = 0.0
+    dF[:, 2, 2] = 1.0
+    s0 = -20e3 * np.eye(3) + 3e3 * rng.standard_normal((n, 3, 3))
+    s0 = 0.5 * (s0 + s0.transpose(0, 2, 1))
+    flows = []
+    for mat in (loc, nl):
+        st = np.zeros((n, mat.n_state))
+        st[:, 0 if mat is loc else mat.nonlocal_column] = a
+        mat.stress(np.arange(n), dF, None, s0, np.zeros((n, 3, 3)), st)
+        flows.append(st[:, 0] - (a if mat is loc else 0.0) > 0.0)
+    assert 0.1 < np.mean(flows[0]) < 0.9, np.mean(flows[0])      # both kinds of step occur
+    assert np.array_equal(flows[0], flows[1])
+
+
 def test_regularised_band_width_follows_length_not_mesh(runs):
     a, b, w = runs[("nl", 0.01)], runs[("nl", 0.005)], runs[("wide", 0.01)]
     assert a["completed"] and b["completed"] and w["completed"], (a["stopped"], b["stopped"])

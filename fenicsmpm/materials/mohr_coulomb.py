@@ -312,16 +312,16 @@ def _clearly_elastic(S, kap_n, par, st, w):
 def _frozen(state, p, nl, mf, par, out):
     """(kappa_n, parameters) seen by the return of particle p: (state[p, 0], par), or with the
     over-nonlocal column nl >= 0 (materials.regularisation) holding A = (1 - m) kappa_n
-    + m <kappa>_n: kappa_bar = max(0, A + (1 - m) dkappa) within the step, i.e.
-        exp(-eta kappa_bar) = exp(-eta' kappa'),  eta' = (1 - m) eta,  kappa' = -A / (1 - m) + dkappa,
-    so the return runs with kappa_n = -A / (1 - m) and out = par with eta' (capped at the
+    + m <kappa>_n: kappa_bar = A + (1 - m) dkappa within the step, i.e.
+        exp(-eta kappa_bar) = exp(-eta' kappa'),  eta' = (1 - m) eta,  kappa' = A / (1 - m) + dkappa,
+    so the return runs with kappa_n = A / (1 - m) and out = par with eta' (capped at the
     peak by _soft); it still returns the step's increment dkappa."""
     if nl < 0:
         return state[p, 0], par
     for k in range(4):
         out[k] = par[k]
     out[4] = (1.0 - mf) * par[4]
-    return -state[p, nl] / (1.0 - mf), out
+    return state[p, nl] / (1.0 - mf), out
 
 
 @numba.njit(cache=True)

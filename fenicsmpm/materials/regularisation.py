@@ -3,42 +3,49 @@
 Without a length scale a softening law localises into one cell: the band width, the
 dissipated energy and the post-peak response depend on h.  Here the variable that drives
 softening, the accumulated plastic (deviatoric) strain kappa (VonMises: eps_p, MohrCoulomb:
-eps_d^p), is replaced in the strength law by an over-nonlocal average over the particles of
-the same material within 3 l:
+eps_d^p, state column 0, still the local value), is replaced in the strength law by the
+over-nonlocal value
 
-    kappa_bar_p = max(0, (1 - m) kappa_p + m <kappa>_p),
+    kappa_bar_p = (1 - m) kappa_p + m <kappa>_p,
     <kappa>_p   = sum_q w(r_pq) V_q kappa_q / sum_q w(r_pq) V_q,
     w(r)        = r / l^2 exp(-(r / l)^2),                       r_pq = |x_p - x_q| < 3 l,
 
-the weight of Galavi & Schweiger (2010, Int. J. Geomech. 10(1)) and the over-nonlocal
-combination of Vermeer & Brinkgreve (1994) that they use, with m > 1 (default 2) and the
-internal length l (`nonlocal_length`).  Why this form rather than Burghardt, Brannon &
-Guilkey (2012, the plain nonlocal average m = 1 of the plastic strain for MPM): with m = 1
-the averaged variable is smooth but the local plastic strain that feeds it can still
-concentrate in one row of points (Jirasek & Rolshoven 2003 analyse this for integral
-nonlocal plasticity: m = 1 regularises the dissipation, not the width of the plastic zone),
-while m > 1 makes a point that has strained more than its neighbourhood relatively stronger,
-so plastic flow spreads over a zone of width ~ l.  The weight vanishes at r = 0 (a point
-does not average itself).  kappa_bar is clipped at 0 so that the strength never exceeds the
-peak.  The sums use the current particle volumes V_q.
+over the particles q of the same material: the weight of Galavi & Schweiger (2010, Int. J.
+Geomech. 10(1)), which vanishes at r = 0, and the over-nonlocal combination (Vermeer &
+Brinkgreve 1994) that they use, with m > 1 (`nonlocal_m`, default 2) and the internal length
+l (`nonlocal_length`).  Why this form and not the plain nonlocal average (m = 1) of the
+plastic strain that Burghardt, Brannon & Guilkey (2012) use in MPM: with m = 1 the averaged
+variable is smooth but the local plastic strain feeding it can still concentrate in one row
+of points (Jirasek & Rolshoven 2003 discuss this for integral nonlocal plasticity), while
+with m > 1 a point that has strained more than its neighbourhood becomes relatively
+stronger, so plastic flow spreads over a zone of width ~ l; and the local part (1 - m) kappa_p
+gives the step a hardening local tangent (below).  kappa_bar is not clipped: where a point
+has strained much more than its neighbourhood it is < 0 and the strength exceeds the peak
+(VonMises: c = c_u + H kappa_bar; MohrCoulomb caps phi and c at their peaks, where its
+exponential law would otherwise pass phi = 90 degrees).  The sums use the current volumes.
 
-Time discretisation (explicit and implicit alike): kappa_bar is computed once per step, at
-its start, from the committed local kappa (Simulation._advance -> `regularise`), stored in
-the material's last state column and frozen during the step.  Within the step the return
-mapping is the local perfectly plastic one at the frozen strength c(kappa_bar_n) (VonMises)
-or phi(kappa_bar_n), c(kappa_bar_n) (MohrCoulomb), and the local kappa grows by the step's
-plastic increment.  The Newton tangent is therefore the exact consistent tangent of this
-frozen-strength return (no softening term, no nonlocal coupling between particles): Newton
-keeps its quadratic convergence and its matrix stays symmetric for VonMises, at the price of
-an O(dt) lag of the softening behind the plastic flow (refine the load steps to reduce it).
+Time discretisation (explicit and implicit alike): at the start of every step (and of every
+retried half step) Simulation._advance calls `regularise`, which stores
+    A_p = (1 - m) kappa_p,n + m <kappa>_p,n
+from the committed local kappa in the material's last state column (nonlocal_column).  In the
+step the return mapping uses kappa_bar = A_p + (1 - m) dkappa_p, dkappa_p the particle's own
+plastic increment: the neighbourhood average is lagged by one step (explicit in time), the
+local part is implicit.  With H <= 0 (eta >= 0) and m > 1 the strength then grows with the
+particle's own increment, slope (1 - m) H >= 0, so the return has one solution and the Newton
+tangent is the exact consistent tangent of this local return (VonMises: the radial return
+tangent with H_t = (1 - m) H; MohrCoulomb: its return with eta' = (1 - m) eta); it is local
+(no coupling between particles), symmetric for VonMises, and positive where the local
+softening tangent was negative, so Newton converges as for a hardening material.  The price
+is an O(dt) lag of the softening behind the neighbours' plastic flow.  Without softening
+(H = 0, eta = 0) the strength does not depend on kappa and the results are the local ones.
 
 Neighbour search: the points are binned into a uniform lattice of cell size h (the grid's
 smallest cell size) anchored at the mesh's lower corner, so on structured grids the bins are
-the grid's cells; a point scans the ceil(3 l / h) rings of bins around its own: O(n k) for
-k neighbours, no O(n^2).  Under MPI every rank receives the particles of the other ranks
-that lie within 3 l of its particles' bounding box (ghost particles, one alltoall), so the
-average is the serial one up to the summation order.  The time spent is reported in
-sim.timers["nonlocal"].
+the grid's cells; a point scans the ceil(3 l / h) rings of bins around its own, O(n k) for k
+neighbours, and is skipped (A = 0) when no point with kappa != 0 lies in those bins.  Under
+MPI every rank receives the particles of the other ranks within 3 l of its particles'
+bounding box (ghost particles, one alltoall), so the average is the serial one up to the
+summation order.  The time spent is in sim.timers["nonlocal"].
 """
 import math
 
