@@ -5,10 +5,13 @@
 
 BENCHMARKS.md W5 (seed 000 ch. 5): a plane-strain half model of a strip footing of width
 B = 0.5 m (the loaded half-width B/2 = 0.25 m next to the symmetry axis x = 0) on a layer
-D = 6 m wide and H = 4 m deep, dx = 0.125 m (--quick: 0.25 m), 2 x 2 particles per cell,
-dt = 0.005 s (at the seed's dx = 0.0625 m the softening band localises under the footing and
-Newton stops converging after t ~ 0.6 s even with step cuts: no regularisation here). Soil: von Mises clay (fm.VonMises) E = 2 MPa, nu = 0.41, rho = 1000 kg/m^3,
-c_u = 10 kPa softening linearly (H = -140 kPa) to c_res = 3 kPa; c_p = 68.2 m/s.
+D = 6 m wide and H = 4 m deep, the seed's dx = 0.0625 m (--quick: 0.25 m; --dx to change),
+2 x 2 particles per cell, dt = 0.005 s. Soil: von Mises clay (fm.VonMises) E = 2 MPa,
+nu = 0.41, rho = 1000 kg/m^3, c_u = 10 kPa softening linearly (H = -140 kPa) to c_res = 3 kPa;
+c_p = 68.2 m/s. The softening is regularised (issue 19, fenicsmpm.materials.regularisation:
+over-nonlocal eps_p, internal length --length, default 0.25 m; --length 0 for local
+softening, with which the band localises into one cell at dx = 0.0625 m and Newton stops
+converging after t ~ 0.6 s even with step cuts).
 
 Stage 1 (geostatic): quasi-static Newton, gravity g = 10 m/s^2 ramped over 50 steps and held
 to step 60 (t = 0.3 s), bottom fixed, rollers on both sides.
@@ -90,11 +93,12 @@ def c_p():
     return math.sqrt(M / RHO)
 
 
-def run_base(base, dx, t_end):
+def run_base(base, dx, t_end, length=None):
     nx, ny = int(round(D / dx)), int(round(H / dx))
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [D, H]], [nx, ny], dmesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
-    soil = fm.VonMises(E=E, nu=NU, density=RHO, c_u=C_U, c_res=C_RES, H=H_SOFT)
+    soil = fm.VonMises(E=E, nu=NU, density=RHO, c_u=C_U, c_res=C_RES, H=H_SOFT,
+                       nonlocal_length=length)
     pts = fm.Particles.fill(grid, soil, per_cell=2)
     qs = fm.QuasiStatic(load_steps=RAMP_STEPS)
     sim = fm.Simulation(grid, pts, qs, dt=DT, gravity=(0.0, -G), max_dt_cuts=4)
@@ -222,17 +226,22 @@ def main(argv=None):
     parser.add_argument("--out", default="results/strip_footing", help="output directory")
     parser.add_argument("--quick", action="store_true",
                         help="coarse grid (dx = 0.25 m), first pulse only, fixed and viscous")
+    parser.add_argument("--dx", type=float, default=None, help="cell size (default 0.0625 m)")
+    parser.add_argument("--length", type=float, default=0.25,
+                        help="nonlocal internal length l [m] (0: local softening)")
+    parser.add_argument("--bases", default=",".join(BASES), help="comma-separated bases")
     args = parser.parse_args(argv)
     if args.quick:
         dx, t_end, bases = 0.25, T0 + PULSE, ("fixed", "viscous")
     else:
-        dx, t_end, bases = 0.125, T0 + N_PULSES * PULSE, BASES
+        dx, t_end, bases = 0.0625, T0 + N_PULSES * PULSE, tuple(args.bases.split(","))
+    dx = args.dx or dx
     if comm.rank == 0:
         os.makedirs(args.out, exist_ok=True)
-    results = [run_base(b, dx, t_end) for b in bases]
+    results = [run_base(b, dx, t_end, args.length or None) for b in bases]
     v_est = P_PEAK / (RHO * c_p())
     strip = lambda r: {k: v for k, v in r.items() if k not in ("x", "eps", "hist")}
-    metrics = dict(dx=dx, t_end=t_end, c_p=c_p(), v_estimate=v_est,
+    metrics = dict(dx=dx, t_end=t_end, nonlocal_length=args.length or None, c_p=c_p(), v_estimate=v_est,
                    prandtl=(2.0 + math.pi) * C_U, runs={r["base"]: strip(r) for r in results})
     if comm.rank == 0:
         png = os.path.join(args.out, "strip_footing.png")

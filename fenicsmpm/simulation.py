@@ -19,6 +19,7 @@ from .io import Progress
 from .kernels import axisymmetric as axi
 from .kernels import transfer as kt
 from .kernels.smoothing import smoothed_stress
+from .materials.regularisation import regularise
 from .setup import SetupMixin
 from .shapes import resolve_shape, standard as ks, wide_shape
 
@@ -374,7 +375,10 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
 
     def _advance(self, dt, cuts_left):
         """integrator.step over dt; on a Newton/KSP failure of an implicit integrator (raised
-        before any state changed) retry as two steps of dt/2, at most `cuts_left` deep."""
+        before any state changed) retry as two steps of dt/2, at most `cuts_left` deep. The
+        nonlocal softening variables are first computed from the committed state
+        (materials.regularisation)."""
+        regularise(self)
         try:
             self.integrator.step(self, dt)
         except (RuntimeError, FloatingPointError) as err:

@@ -80,7 +80,8 @@ class _Newton:
 
         Converged when |R| <= rtol |f|, or when the last correction is below utol |du| with
         |R| <= sqrt(rtol) |f| (stagnation at round-off). |f| = max(|f_ext|, |f_int|, |R_0|,
-        force_scale): the initial residual R_0 and force_scale (|M v^n| / dt + |M a^n| for
+        force_scale, and when du0 moves fixed dofs the reactions): the initial residual R_0 and
+        force_scale (|M v^n| / dt + |M a^n| for
         Newmark) carry the inertial load when f_ext and f_int vanish (rigid motion), also when
         the predictor du0 is already exact."""
         p, grid, T, sys = sim.particles, sim.grid, sim.timers, self.system
@@ -89,7 +90,12 @@ class _Newton:
         m = sim.nodal["mass"]
         constrained = (sim.fixed | ~sim.nodal["active"][:, None]).ravel()
         cmask = constrained.reshape(-1, d)
-        du = np.zeros((grid.n_nodes, d)) if du0 is None else np.where(cmask, 0.0, du0)
+        # du0 keeps its values on active fixed dofs: prescribed increments (displacement control)
+        du = (np.zeros((grid.n_nodes, d)) if du0 is None
+              else np.where(cmask & ~(sim.fixed & sim.nodal["active"][:, None]), 0.0, du0))
+        moving = bool(np.any(du[sim.fixed] != 0.0))     # the reactions then carry the load
+        if sim.comm.size > 1:
+            moving = sim.comm.allreduce(moving)
         t0 = time.perf_counter()
         plan = sys.plan(sim.nodes)
         T["assembly"] += time.perf_counter() - t0
@@ -120,12 +126,13 @@ class _Newton:
                     sim.layer_force(u_rel, v_p, fr)
                 grid.accumulate(fr)
                 R += fr
+            reaction = np.where(sim.fixed, -R, 0.0)
             R[cmask] = 0.0
             rnorm = self._norm(sim, R)
             if it == 0:
                 r0 = rnorm
             scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), r0, force_scale,
-                        1e-300)
+                        self._norm(sim, reaction) if moving else 0.0, 1e-300)
             T["solve"] += time.perf_counter() - t1
             if not np.isfinite(rnorm):
                 raise FloatingPointError(f"step {sim.step_count}, t = {sim.t:.6g}: non-finite "
@@ -166,6 +173,7 @@ class _Newton:
             T["ksp"] += t4 - t3
             T["solve"] += t4 - t2
         self.iterations.append(it)
+        sim.nodal["reaction"] = reaction        # force the fixed dofs exert (summed over ranks)
         if sim.robin is not None:
             sim.robin_u += du
         sim.stats.update(newton_iterations=it, residual=rnorm / scale, ksp_iterations=sys.iterations)
@@ -253,13 +261,21 @@ class Newmark(_Newton):
 
 class QuasiStatic(_Newton):
     """Quasi-static Newton (no inertia). Gravity is ramped linearly over `load_steps` steps and
-    then held; tractions follow their own time functions."""
+    then held; tractions follow their own time functions.
 
-    def __init__(self, load_steps=1, **kw):
+    displacement: None, or u(x, t) -> (n, gdim) for displacement control: each step moves the
+    fixed dofs (sim.fix) by u(x, t + dt) - u(x, t), x the node coordinates, and starts Newton
+    from that increment on the free dofs too (so u should be a plausible field there, e.g. 0);
+    the force the fixed dofs exert is sim.nodal["reaction"] after the step."""
+
+    def __init__(self, load_steps=1, displacement=None, **kw):
         super().__init__(**kw)
         if not (isinstance(load_steps, int) and load_steps >= 1):
             raise ValueError(f"QuasiStatic: 'load_steps' must be a positive integer, got {load_steps!r}")
+        if displacement is not None and not callable(displacement):
+            raise TypeError(f"QuasiStatic: 'displacement' must be None or u(x, t), got {displacement!r}")
         self.load_steps = load_steps
+        self.displacement = displacement
 
     def step(self, sim, dt):
         p, grid = sim.particles, sim.grid
@@ -270,8 +286,13 @@ class QuasiStatic(_Newton):
         active = sim.active_mask(m)
         f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale, active=active)
         sim.nodal = dict(mass=m, active=active)
+        du0 = None
+        if self.displacement is not None:
+            x = grid.node_x
+            du0 = (np.asarray(self.displacement(x, sim.t + dt), dtype=float)
+                   - np.asarray(self.displacement(x, sim.t), dtype=float))
         du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt,
-                             np.zeros((grid.n_nodes, sim.gdim)))
+                             np.zeros((grid.n_nodes, sim.gdim)), du0=du0)
         zero = np.zeros_like(du)
         kt.g2p(sim.grid.D, sim.nodes, sim.N, du, zero, zero, 1.0, p.x, p.v, p.u)
         p.v[:] = 0.0

@@ -27,7 +27,10 @@ assembled with the spectral derivative (off-diagonal eigenbasis terms
 (sigma_i - sigma_j) / (sigma_tr_i - sigma_tr_j)) and chained with the Jaumann elastic predictor.
 
 History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
-                         1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p).
+                         1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p),
+                         2 = with nonlocal_length, A = (1 - m) eps_d^p + m <eps_d^p> of the
+                             step start, from which phi and c follow within the step
+                             (materials.regularisation, _frozen).
 """
 import math
 
@@ -35,6 +38,7 @@ import numba
 import numpy as np
 
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
+from .regularisation import NonlocalSoftening
 from .validation import check_real
 
 __all__ = ["MohrCoulomb", "mohr_coulomb_stress_kernel", "mohr_coulomb_tangent_kernel"]
@@ -53,8 +57,11 @@ _SQ23 = math.sqrt(2.0 / 3.0)
 
 @numba.njit(cache=True)
 def _soft(x_peak, x_res, eta, kappa):
-    """x = x_res + (x_peak - x_res) exp(-eta kappa) and dx/dkappa."""
+    """x = x_res + (x_peak - x_res) exp(-eta kappa) and dx/dkappa, capped at x_peak (reached
+    only by the over-nonlocal form, eta kappa < 0: see _frozen)."""
     e = math.exp(-eta * kappa)
+    if e > 1.0:
+        return x_peak, 0.0
     return x_res + (x_peak - x_res) * e, -eta * (x_peak - x_res) * e
 
 
@@ -302,9 +309,27 @@ def _clearly_elastic(S, kap_n, par, st, w):
 
 
 @numba.njit(cache=True)
-def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st):
+def _frozen(state, p, nl, mf, par, out):
+    """(kappa_n, parameters) seen by the return of particle p: (state[p, 0], par), or with the
+    over-nonlocal column nl >= 0 (materials.regularisation) holding A = (1 - m) kappa_n
+    + m <kappa>_n: kappa_bar = A + (1 - m) dkappa within the step, i.e.
+        exp(-eta kappa_bar) = exp(-eta' kappa'),  eta' = (1 - m) eta,  kappa' = A / (1 - m) + dkappa,
+    so the return runs with kappa_n = A / (1 - m) and out = par with eta' (capped at the
+    peak by _soft); it still returns the step's increment dkappa."""
+    if nl < 0:
+        return state[p, 0], par
+    for k in range(4):
+        out[k] = par[k]
+    out[4] = (1.0 - mf) * par[4]
+    return state[p, nl] / (1.0 - mf), out
+
+
+@numba.njit(cache=True)
+def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf):
     """sigma_new = principal return of the Jaumann predictor; state[:, 0:2] += (d eps_d^p,
-    d eps_v^p).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians."""
+    d eps_v^p).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians; nl: see
+    _frozen."""
+    pf = np.empty(5)
     S = np.empty((3, 3))
     sig = np.empty(3)
     A = np.empty((3, 3))
@@ -314,13 +339,14 @@ def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, pa
     for q in range(idx.shape[0]):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
-        if _clearly_elastic(S, state[p, 0], par, st, w0):
+        kap, pp = _frozen(state, p, nl, mf, par, pf)
+        if _clearly_elastic(S, kap, pp, st, w0):
             for i in range(3):
                 for j in range(3):
                     sigma_new[p, i, j] = S[i, j]
             continue
         w, V = np.linalg.eigh(S)
-        plastic, dk, dv = _mc_return(w, state[p, 0], lam, mu, par, spsi, st, sig, A, W, M)
+        plastic, dk, dv = _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M)
         if not plastic:
             for i in range(3):
                 for j in range(3):
@@ -335,8 +361,9 @@ def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, pa
 
 
 @numba.njit(cache=True)
-def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st):
+def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf):
     """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state."""
+    pf = np.empty(5)
     S = np.empty((3, 3))
     sig = np.empty(3)
     A = np.empty((3, 3))
@@ -351,10 +378,11 @@ def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, s
     for q in range(idx.shape[0]):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
-        elastic = _clearly_elastic(S, state[p, 0], par, st, w0)
+        kap, pp = _frozen(state, p, nl, mf, par, pf)
+        elastic = _clearly_elastic(S, kap, pp, st, w0)
         if not elastic:
             w, V = np.linalg.eigh(S)
-            _mc_return(w, state[p, 0], lam, mu, par, spsi, st, sig, A, W, M)
+            _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M)
             scale = max(abs(w[0]), abs(w[2]), 1e-300)
             for i in range(3):
                 for j in range(3):
@@ -405,7 +433,7 @@ def _check_range(owner, name, value, lo, hi, hi_open=False, what=""):
     return v
 
 
-class MohrCoulomb(IsotropicElasticParameters):
+class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
     """Non-associated Mohr-Coulomb soil with tension cut-off and exponential softening.
 
     f = 1/2 (sigma_3 - sigma_1) + 1/2 (sigma_1 + sigma_3) sin(phi) - c cos(phi)  (seed 002 eq 5.1),
@@ -417,17 +445,21 @@ class MohrCoulomb(IsotropicElasticParameters):
         0 <= phi < 90, c >= 0 (phi > 0 or c > 0);
         0 <= psi <= phi_res;  tension_cutoff: None (none) or sigma_t >= 0 on sigma_3;
         phi_res in [0, phi] (default phi), c_res in [0, c] (default c), phi_res > 0 or c_res > 0;
-        eta >= 0 (softening rate; 0 = perfectly plastic).
-    History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p.
+        eta >= 0 (softening rate; 0 = perfectly plastic);
+        nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: phi and c follow the
+        over-nonlocal average of eps_d^p (materials.regularisation).
+    History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p, with nonlocal_length
+    state[:, 2] = A (module docstring).
     """
 
     name = "MohrCoulomb"
     n_state = 2
 
     def __init__(self, E, nu, density, phi, c, psi=0.0, tension_cutoff=None, phi_res=None,
-                 c_res=None, eta=0.0):
+                 c_res=None, eta=0.0, nonlocal_length=None, nonlocal_m=2.0):
         owner = type(self).__name__
         self._set_parameters(E, nu, density)
+        self._set_nonlocal(nonlocal_length, nonlocal_m, 2)
         self._phi = _check_range(owner, "phi", phi, 0.0, 90.0, hi_open=True, what=" degrees")
         self._c = check_real(owner, "c", c)
         if self._c < 0.0:
@@ -473,7 +505,8 @@ class MohrCoulomb(IsotropicElasticParameters):
         par = np.array([math.radians(self._phi), math.radians(self._phi_res), self._c,
                         self._c_res, self._eta])
         st = math.inf if self._st is None else self._st
-        return self.lame_lambda, self.shear_modulus, par, math.sin(math.radians(self._psi)), st
+        return (self.lame_lambda, self.shear_modulus, par, math.sin(math.radians(self._psi)), st,
+                self.nonlocal_column, self.nonlocal_m)
 
     def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
         """Write sigma_new[idx] and the trial history state[idx]; ``F_old`` is unused."""
@@ -502,10 +535,11 @@ class MohrCoulomb(IsotropicElasticParameters):
                            psi=min(self._psi, phi_res),
                            tension_cutoff=None if self._st is None else self._st / F,
                            phi_res=min(phi_res, red(self._phi)), c_res=self._c_res / F,
-                           eta=self._eta)
+                           eta=self._eta, nonlocal_length=self.nonlocal_length,
+                           nonlocal_m=self.nonlocal_m)
 
     def __repr__(self):
         return (f"MohrCoulomb(E={self.E!r}, nu={self.nu!r}, density={self.density!r}, "
                 f"phi={self._phi!r}, c={self._c!r}, psi={self._psi!r}, "
                 f"tension_cutoff={self._st!r}, phi_res={self._phi_res!r}, "
-                f"c_res={self._c_res!r}, eta={self._eta!r})")
+                f"c_res={self._c_res!r}, eta={self._eta!r}{self._nonlocal_repr()})")

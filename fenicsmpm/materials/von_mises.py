@@ -16,7 +16,9 @@ as d sigma / d sigma_tr, acting on the predictor increment X:
     d sigma = tr(X)/3 I + (1 - 3 G dg/q_tr) dev(X) + 3 G (dg/q_tr - 1/(3 G + sqrt(3) H_t)) n (n:X),
 n = s_tr/|s_tr|, H_t = H on the softening branch and 0 on the residual one.
 
-History (state columns): 0 = eps_p (equivalent plastic strain).
+History (state columns): 0 = eps_p (equivalent plastic strain); with nonlocal_length, 1 =
+A = (1 - m) eps_p + m <eps_p> of the step start, from which c follows within the step
+(materials.regularisation, _vm_return_over).
 """
 import math
 
@@ -25,6 +27,7 @@ import numpy as np
 
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .mohr_coulomb import _trial
+from .regularisation import NonlocalSoftening
 from .validation import check_positive, check_real
 
 __all__ = ["VonMises", "von_mises_stress_kernel", "von_mises_tangent_kernel"]
@@ -33,16 +36,22 @@ _SQ3 = math.sqrt(3.0)
 
 
 @numba.njit(cache=True)
-def _vm_return(S, ep_n, mu, c_u, c_res, H, s_out):
-    """Radial return of the predictor S: writes s_out = dev(S) and returns (dg, q_tr, H_t),
-    dg = 0 for an elastic step, H_t the slope dc/d eps_p of the branch reached."""
+def _deviator(S, s_out):
+    """s_out = dev(S); returns q = sqrt(3/2 s:s)."""
     pm = (S[0, 0] + S[1, 1] + S[2, 2]) / 3.0
     ss = 0.0
     for i in range(3):
         for j in range(3):
             s_out[i, j] = S[i, j] - (pm if i == j else 0.0)
             ss += s_out[i, j] * s_out[i, j]
-    q = math.sqrt(1.5 * ss)
+    return math.sqrt(1.5 * ss)
+
+
+@numba.njit(cache=True)
+def _vm_return(S, ep_n, mu, c_u, c_res, H, s_out):
+    """Radial return of the predictor S: writes s_out = dev(S) and returns (dg, q_tr, H_t),
+    dg = 0 for an elastic step, H_t the slope dc/d eps_p of the branch reached."""
+    q = _deviator(S, s_out)
     c_n = max(c_res, c_u + H * ep_n)
     if q - _SQ3 * c_n <= 0.0:
         return 0.0, q, 0.0
@@ -54,14 +63,38 @@ def _vm_return(S, ep_n, mu, c_u, c_res, H, s_out):
 
 
 @numba.njit(cache=True)
-def von_mises_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H):
-    """sigma_new = p_tr I + (1 - 3 G dg / q_tr) s_tr;  state[:, 0] += dg."""
+def _vm_return_over(S, A, mf, mu, c_u, c_res, H, s_out):
+    """Radial return with the over-nonlocal variable of the step (materials.regularisation)
+    eps_p_bar = A + (1 - m) dg, A = (1 - m) eps_p,n + m <eps_p>_n frozen:
+        c(dg) = max(c_res, c_0 + H_h dg),  c_0 = c_u + H A,  H_h = (1 - m) H >= 0
+    (no cap at c_u: eps_p_bar < 0 where a point has strained more than its neighbourhood),
+    non-decreasing in dg, so q_tr - 3 G dg - sqrt(3) c(dg) = 0 has one root, found on each
+    linear branch.  Writes s_out = dev(S); returns (dg, q_tr, H_t) as _vm_return."""
+    q = _deviator(S, s_out)
+    c0 = c_u + H * A
+    Hh = (1.0 - mf) * H
+    if q - _SQ3 * max(c_res, c0) <= 0.0:
+        return 0.0, q, 0.0
+    if c0 < c_res:
+        dg = (q - _SQ3 * c_res) / (3.0 * mu)
+        if c0 + Hh * dg <= c_res:
+            return dg, q, 0.0
+    return (q - _SQ3 * c0) / (3.0 * mu + _SQ3 * Hh), q, Hh
+
+
+@numba.njit(cache=True)
+def von_mises_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl, mf):
+    """sigma_new = p_tr I + (1 - 3 G dg / q_tr) s_tr;  state[:, 0] += dg.  nl >= 0: the column
+    of the over-nonlocal A with factor mf (_vm_return_over), nl = -1: local softening."""
     S = np.empty((3, 3))
     s = np.empty((3, 3))
     for q in range(idx.shape[0]):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
-        dg, qtr, _ = _vm_return(S, state[p, 0], mu, c_u, c_res, H, s)
+        if nl < 0:
+            dg, qtr, _ = _vm_return(S, state[p, 0], mu, c_u, c_res, H, s)
+        else:
+            dg, qtr, _ = _vm_return_over(S, state[p, nl], mf, mu, c_u, c_res, H, s)
         fac = 1.0 - 3.0 * mu * dg / qtr if dg > 0.0 else 1.0
         for i in range(3):
             for j in range(3):
@@ -70,7 +103,7 @@ def von_mises_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, 
 
 
 @numba.njit(cache=True)
-def von_mises_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H):
+def von_mises_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H, nl, mf):
     """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state."""
     S = np.empty((3, 3))
     s = np.empty((3, 3))
@@ -78,7 +111,10 @@ def von_mises_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_re
     for q in range(idx.shape[0]):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
-        dg, qtr, Ht = _vm_return(S, state[p, 0], mu, c_u, c_res, H, s)
+        if nl < 0:
+            dg, qtr, Ht = _vm_return(S, state[p, 0], mu, c_u, c_res, H, s)
+        else:
+            dg, qtr, Ht = _vm_return_over(S, state[p, nl], mf, mu, c_u, c_res, H, s)
         alpha = 1.0
         beta = 0.0
         if dg > 0.0:
@@ -107,22 +143,26 @@ def von_mises_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_re
                         dsig[p, i, j, k, l] = v
 
 
-class VonMises(IsotropicElasticParameters):
+class VonMises(NonlocalSoftening, IsotropicElasticParameters):
     """Von Mises undrained clay, f = sqrt(3 J2) - sqrt(3) c(eps_p) (seed 000 ch. 5, L1420:
     sigma_dev^peak = sqrt(3) c_u, so c_u is the pure-shear strength), with linear softening
     c(eps_p) = max(c_res, c_u + H eps_p) (seed 000 L1349).  See the module docstring.
 
     Parameters: E > 0, -1 < nu < 0.5, density > 0, c_u > 0, 0 <= c_res <= c_u (default c_u:
-    perfectly plastic), H <= 0 with 3 G + sqrt(3) H > 0 (no snap-back of the local return).
-    History: state[:, 0] = eps_p.
+    perfectly plastic), H <= 0 with 3 G + sqrt(3) H > 0 (no snap-back of the local return);
+    nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: c follows the
+    over-nonlocal average of eps_p (materials.regularisation).
+    History: state[:, 0] = eps_p (local), with nonlocal_length state[:, 1] = A (module doc).
     """
 
     name = "VonMises"
     n_state = 1
 
-    def __init__(self, E, nu, density, c_u, c_res=None, H=0.0):
+    def __init__(self, E, nu, density, c_u, c_res=None, H=0.0, nonlocal_length=None,
+                 nonlocal_m=2.0):
         owner = type(self).__name__
         self._set_parameters(E, nu, density)
+        self._set_nonlocal(nonlocal_length, nonlocal_m, 1)
         self._c_u = check_positive(owner, "c_u", c_u)
         if c_res is None:
             self._c_res = self._c_u
@@ -147,7 +187,8 @@ class VonMises(IsotropicElasticParameters):
         return np.maximum(self._c_res, self._c_u + self._H * np.asarray(eps_p, dtype=float))
 
     def _kernel_args(self):
-        return self.lame_lambda, self.shear_modulus, self._c_u, self._c_res, self._H
+        return (self.lame_lambda, self.shear_modulus, self._c_u, self._c_res, self._H,
+                self.nonlocal_column, self.nonlocal_m)
 
     def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
         """Write sigma_new[idx] and the trial history state[idx]; ``F_old`` is unused."""
@@ -161,4 +202,4 @@ class VonMises(IsotropicElasticParameters):
 
     def __repr__(self):
         return (f"VonMises(E={self.E!r}, nu={self.nu!r}, density={self.density!r}, "
-                f"c_u={self._c_u!r}, c_res={self._c_res!r}, H={self._H!r})")
+                f"c_u={self._c_u!r}, c_res={self._c_res!r}, H={self._H!r}{self._nonlocal_repr()})")

@@ -1,0 +1,210 @@
+"""Nonlocal regularisation of the softening variable of MohrCoulomb and VonMises (issue 19).
+
+Without a length scale a softening law localises into one cell: the band width, the
+dissipated energy and the post-peak response depend on h.  Here the variable that drives
+softening, the accumulated plastic (deviatoric) strain kappa (VonMises: eps_p, MohrCoulomb:
+eps_d^p, state column 0, still the local value), is replaced in the strength law by the
+over-nonlocal value
+
+    kappa_bar_p = (1 - m) kappa_p + m <kappa>_p,
+    <kappa>_p   = sum_q w(r_pq) V_q kappa_q / sum_q w(r_pq) V_q,
+    w(r)        = r / l^2 exp(-(r / l)^2),                       r_pq = |x_p - x_q| < 3 l,
+
+over the particles q of the same material: the weight of Galavi & Schweiger (2010, Int. J.
+Geomech. 10(1)), which vanishes at r = 0, and the over-nonlocal combination (Vermeer &
+Brinkgreve 1994) that they use, with m > 1 (`nonlocal_m`, default 2) and the internal length
+l (`nonlocal_length`).  Why this form and not the plain nonlocal average (m = 1) of the
+plastic strain that Burghardt, Brannon & Guilkey (2012) use in MPM: with m = 1 the averaged
+variable is smooth but the local plastic strain feeding it can still concentrate in one row
+of points (Jirasek & Rolshoven 2003 discuss this for integral nonlocal plasticity), while
+with m > 1 a point that has strained more than its neighbourhood becomes relatively
+stronger, so plastic flow spreads over a zone of width ~ l; and the local part (1 - m) kappa_p
+gives the step a hardening local tangent (below).  kappa_bar is not clipped: where a point
+has strained much more than its neighbourhood it is < 0 and the strength exceeds the peak
+(VonMises: c = c_u + H kappa_bar; MohrCoulomb caps phi and c at their peaks, where its
+exponential law would otherwise pass phi = 90 degrees).  The sums use the current volumes.
+
+Time discretisation (explicit and implicit alike): at the start of every step (and of every
+retried half step) Simulation._advance calls `regularise`, which stores
+    A_p = (1 - m) kappa_p,n + m <kappa>_p,n
+from the committed local kappa in the material's last state column (nonlocal_column).  In the
+step the return mapping uses kappa_bar = A_p + (1 - m) dkappa_p, dkappa_p the particle's own
+plastic increment: the neighbourhood average is lagged by one step (explicit in time), the
+local part is implicit.  With H <= 0 (eta >= 0) and m > 1 the strength then grows with the
+particle's own increment, slope (1 - m) H >= 0, so the return has one solution and the Newton
+tangent is the exact consistent tangent of this local return (VonMises: the radial return
+tangent with H_t = (1 - m) H; MohrCoulomb: its return with eta' = (1 - m) eta); it is local
+(no coupling between particles), symmetric for VonMises, and positive where the local
+softening tangent was negative, so Newton converges as for a hardening material.  The price
+is an O(dt) lag of the softening behind the neighbours' plastic flow.  Without softening
+(H = 0, eta = 0) the strength does not depend on kappa and the results are the local ones.
+
+Neighbour search: the points are binned into a uniform lattice of cell size h (the grid's
+smallest cell size) anchored at the mesh's lower corner, so on structured grids the bins are
+the grid's cells; a point scans the ceil(3 l / h) rings of bins around its own, O(n k) for k
+neighbours, and is skipped (A = 0) when no point with kappa != 0 lies in those bins.  Under
+MPI every rank receives the particles of the other ranks within 3 l of its particles'
+bounding box (ghost particles, one alltoall), so the average is the serial one up to the
+summation order.  The time spent is in sim.timers["nonlocal"].
+"""
+import math
+
+import numba
+import numpy as np
+
+from .validation import check_positive, check_real
+
+__all__ = ["NonlocalSoftening", "nonlocal_average", "regularise", "CUTOFF"]
+
+CUTOFF = 3.0        # neighbours within CUTOFF * l (w(3 l) / max w < 1e-3)
+
+
+@numba.njit(cache=True)
+def nonlocal_average(x, vol, kap, n_own, origin, hb, length, m, out):
+    """out[p] = A_p = (1 - m) kap[p] + m sum_q w_pq V_q kap_q / sum_q w_pq V_q for the first
+    n_own points p of x (the rest are ghosts), w = r / l^2 exp(-(r/l)^2) for r < 3 l
+    (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`."""
+    n, d = x.shape
+    b = np.zeros((n, 3), dtype=np.int64)
+    nb = np.ones(3, dtype=np.int64)
+    for j in range(n):
+        for k in range(d):
+            c = max(0, int(math.floor((x[j, k] - origin[k]) / hb)))
+            b[j, k] = c
+            nb[k] = max(nb[k], c + 1)
+    start = np.zeros(nb[0] * nb[1] * nb[2] + 1, dtype=np.int64)
+    lin = np.empty(n, dtype=np.int64)
+    for j in range(n):
+        lin[j] = (b[j, 0] * nb[1] + b[j, 1]) * nb[2] + b[j, 2]
+        start[lin[j] + 1] += 1
+    for c in range(len(start) - 1):
+        start[c + 1] += start[c]
+    fill = start[:-1].copy()
+    order = np.empty(n, dtype=np.int64)
+    hot = np.zeros(len(start) - 1, dtype=np.bool_)      # bins holding a point with kap != 0
+    for j in range(n):
+        order[fill[lin[j]]] = j
+        fill[lin[j]] += 1
+        if kap[j] != 0.0:
+            hot[lin[j]] = True
+    rad2 = (CUTOFF * length) ** 2
+    il2 = 1.0 / (length * length)
+    nr = int(math.ceil(CUTOFF * length / hb))
+    lo = np.zeros(3, dtype=np.int64)
+    hi = np.ones(3, dtype=np.int64)
+    for p in range(n_own):
+        for k in range(d):
+            lo[k] = max(0, b[p, k] - nr)
+            hi[k] = min(nb[k], b[p, k] + nr + 1)
+        near = False
+        for b0 in range(lo[0], hi[0]):
+            for b1 in range(lo[1], hi[1]):
+                for b2 in range(lo[2], hi[2]):
+                    near = near or hot[(b0 * nb[1] + b1) * nb[2] + b2]
+        if not near:                # every kap within reach is 0 (kap[p] too): A_p = 0
+            out[p] = 0.0
+            continue
+        num = 0.0
+        den = 0.0
+        for b0 in range(lo[0], hi[0]):
+            for b1 in range(lo[1], hi[1]):
+                for b2 in range(lo[2], hi[2]):
+                    c = (b0 * nb[1] + b1) * nb[2] + b2
+                    for jj in range(start[c], start[c + 1]):
+                        q = order[jj]
+                        r2 = 0.0
+                        for k in range(d):
+                            r2 += (x[p, k] - x[q, k]) ** 2
+                        if r2 < rad2:
+                            w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
+                            num += w * kap[q]
+                            den += w
+        avg = num / den if den > 0.0 else kap[p]
+        out[p] = (1.0 - m) * kap[p] + m * avg
+
+
+def _with_ghosts(comm, x, vol, kap, radius):
+    """(x, V, kappa) of the local points followed by the other ranks' points within `radius`
+    of the local bounding box (one alltoall); the local points come first."""
+    if comm.size == 1:
+        return x, vol, kap
+    d = x.shape[1]
+    box = (x.min(axis=0), x.max(axis=0)) if len(x) else (np.full(d, np.inf), np.full(d, -np.inf))
+    boxes = comm.allgather(box)
+    send = []
+    for r, (lo, hi) in enumerate(boxes):
+        if r == comm.rank or not len(x):
+            send.append(None)
+            continue
+        sel = np.all((x > lo - radius) & (x < hi + radius), axis=1)
+        send.append((x[sel], vol[sel], kap[sel]) if np.any(sel) else None)
+    got = [g for g in comm.alltoall(send) if g is not None]
+    return (np.ascontiguousarray(np.concatenate([x] + [g[0] for g in got])),
+            np.concatenate([vol] + [g[1] for g in got]),
+            np.concatenate([kap] + [g[2] for g in got]))
+
+
+def regularise(sim):
+    """At the start of a step: kappa_bar (column nonlocal_column) of every particle of a
+    material with a nonlocal_length, from the committed local kappa (column 0); collective.
+    Adds its wall time to sim.timers["nonlocal"]."""
+    import time
+    p = sim.particles
+    mats = [m for m in p.materials if getattr(m, "nonlocal_length", None) is not None]
+    if not mats:
+        return
+    t0 = time.perf_counter()
+    comm, grid = sim.comm, sim.grid
+    origin = getattr(sim, "_nonlocal_origin", None)
+    if origin is None:
+        lo = np.ascontiguousarray(grid.node_x.min(axis=0) if grid.n_nodes
+                                  else np.full(grid.gdim, np.inf), dtype=np.float64)
+        origin = lo.copy()
+        if comm.size > 1:
+            from mpi4py import MPI
+            comm.Allreduce(lo, origin, op=MPI.MIN)
+        sim._nonlocal_origin = origin
+    groups = dict((id(m), idx) for m, idx in sim.material_groups())
+    for mat in mats:
+        idx = groups.get(id(mat), np.zeros(0, dtype=np.int64))
+        col = mat.nonlocal_column
+        x, vol, kap = _with_ghosts(comm, p.x[idx], p.V[idx], p.state[idx, 0],
+                                   CUTOFF * mat.nonlocal_length)
+        out = np.empty(len(idx))
+        if len(idx):
+            nonlocal_average(x, vol, kap, len(idx), origin, grid.h, mat.nonlocal_length,
+                             mat.nonlocal_m, out)
+        p.state[idx, col] = out
+    sim.timers["nonlocal"] = sim.timers.get("nonlocal", 0.0) + time.perf_counter() - t0
+
+
+class NonlocalSoftening:
+    """Mixin of MohrCoulomb and VonMises: the optional nonlocal softening variable.
+
+    nonlocal_length: None (local softening, the default) or the internal length l > 0;
+    nonlocal_m: the over-nonlocal factor m >= 1 (module docstring).  With a length the
+    material has one more state column, `nonlocal_column`, holding kappa_bar."""
+
+    def _set_nonlocal(self, length, m, local_columns):
+        owner = type(self).__name__
+        self._nl_m = check_real(owner, "nonlocal_m", m)
+        if not self._nl_m > 1.0:
+            raise ValueError(f"{owner}: parameter 'nonlocal_m' must be > 1 (over-nonlocal), "
+                             f"got {self._nl_m!r}")
+        if length is None:
+            self._nl_length = None
+            self.n_state = local_columns
+            self.nonlocal_column = -1
+        else:
+            self._nl_length = check_positive(owner, "nonlocal_length", length)
+            self.n_state = local_columns + 1
+            self.nonlocal_column = local_columns
+
+    nonlocal_length = property(lambda self: self._nl_length,
+                               doc="Internal length l of the nonlocal average (None: local).")
+    nonlocal_m = property(lambda self: self._nl_m, doc="Over-nonlocal factor m.")
+
+    def _nonlocal_repr(self):
+        if self._nl_length is None:
+            return ""
+        return f", nonlocal_length={self._nl_length!r}, nonlocal_m={self._nl_m!r}"

@@ -1,0 +1,172 @@
+"""Strain localisation scenes (issue 19): a softening shear layer and the W5 strip footing
+pushed to failure, with and without the nonlocal regularisation of the softening variable
+(fenicsmpm.materials.regularisation).  Soil of W5 (seed 000 ch. 5): von Mises clay, E = 2 MPa,
+nu = 0.41, rho = 1000 kg/m^3, c_u = 10 kPa softening linearly (H = -140 kPa) to 3 kPa.
+
+Band width (both scenes): the equivalent width of the plastic strain field,
+    w = sum_p V_p eps_p / (L_band eps_p,max),
+the area under the eps_p profile divided by its peak and the band's length L_band (the layer
+width for the shear layer): one cell for a band in one row of cells, ~ the width of a
+smooth profile otherwise.
+"""
+import math
+import time
+
+import numpy as np
+from dolfinx import mesh as dmesh
+
+from ..grid import Grid
+from ..integrators import QuasiStatic
+from ..materials import VonMises
+from ..particles import Particles
+from ..simulation import Simulation
+
+__all__ = ["W5_SOIL", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length"]
+
+W5_SOIL = dict(E=2.0e6, nu=0.41, density=1000.0, c_u=10.0e3, c_res=3.0e3, H=-140.0e3)
+
+
+def soil(length=None, m=2.0):
+    """The W5 von Mises clay, regularised with internal length `length` (None: local)."""
+    return VonMises(**W5_SOIL, nonlocal_length=length, nonlocal_m=m)
+
+
+def _gsum(comm, x):
+    return comm.allreduce(x) if comm.size > 1 else x
+
+
+def _gmax(comm, x):
+    from mpi4py import MPI
+    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
+
+
+def _run(sim, steps, record):
+    """Advance up to `steps` steps, calling record() after each; returns (completed, message)."""
+    for _ in range(steps):
+        try:
+            sim.step()
+        except (RuntimeError, FloatingPointError) as err:     # every rank raises the same
+            return False, str(err).splitlines()[0]
+        record()
+    return True, None
+
+
+def shear_layer_simulation(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006,
+                           steps=60, m=2.0, weak=0.005, material=None):
+    """The Simulation of `shear_layer` (same arguments; `material` replaces the W5 soil)."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD if comm is None else comm
+    nx, ny = max(1, int(round(width / h))), int(round(height / h))
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [width, height]], [nx, ny],
+                                 dmesh.CellType.quadrilateral)
+    grid = Grid(msh)
+    pts = Particles.fill(grid, soil(length, m) if material is None else material, per_cell=2)
+    pts.state[np.abs(pts.x[:, 1] - 0.5 * height) < 0.01, 0] = weak
+    qs = QuasiStatic(displacement=lambda x, t: np.column_stack(
+        [u_end * t * x[:, 1] / height, np.zeros(len(x))]))
+    sim = Simulation(grid, pts, qs, dt=1.0 / steps, on_leave="periodic")
+    sim.set_periodic(axis=0)
+    tol = 1e-6 * h
+    sim.fix(lambda x: np.abs(x[:, 1]) < tol)
+    sim.fix(lambda x: np.abs(x[:, 1] - height) < tol, [0])
+    sim.fix(lambda x: np.ones(len(x), dtype=bool), [1])
+    return sim
+
+
+def shear_layer(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006, steps=60,
+                m=2.0, weak=0.005, material=None):
+    """Simple shear of a periodic layer (height x width, quadrilaterals of size h, 2 x 2
+    particles per cell): bottom fixed, the top moved by u(t) = u_end t in x over t in [0, 1]
+    (`steps` quasi-static steps, displacement control), u_y = 0 everywhere, so the solution
+    is 1D, tau(y) = tau.  Imperfection: the particles within 0.01 m of mid-height start with
+    eps_p = `weak`.  Returns u (top displacement), tau (mean sigma_xy), the final eps_p
+    profile (y, eps_p), the band width w (module docstring, L = width), Newton iterations,
+    completed/stop message, time split (step wall, nonlocal), ids, state, stress and initial
+    positions x0 of the local particles."""
+    sim = shear_layer_simulation(h, length, comm, height, width, u_end, steps, m, weak, material)
+    comm, qs = sim.comm, sim.integrator
+    p = sim.particles
+    vol0 = _gsum(comm, float(p.V.sum()))
+    u, tau = [0.0], [0.0]
+
+    def record():
+        u.append(u_end * sim.t)
+        tau.append(_gsum(comm, float(np.sum(p.V * p.stress[:, 0, 1]))) / vol0)
+
+    t0 = time.perf_counter()
+    done, msg = _run(sim, steps, record)
+    wall = _gmax(comm, time.perf_counter() - t0)
+    eps = p.state[:, 0]
+    emax = _gmax(comm, float(eps.max()) if len(p) else 0.0)
+    band = _gsum(comm, float(np.sum(p.V * eps))) / (width * emax) if emax > 0 else 0.0
+    prof = comm.gather((p.x[:, 1].copy(), eps.copy()), root=0)
+    y = np.concatenate([a for a, _ in prof]) if comm.rank == 0 else None
+    e = np.concatenate([b for _, b in prof]) if comm.rank == 0 else None
+    return dict(h=h, length=length, u=np.array(u), tau=np.array(tau), completed=done,
+                stopped=msg, band_width=band, eps_max=emax, y=y, eps=e,
+                newton=list(qs.iterations), wall_s=wall,
+                nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
+                n_particles=_gsum(comm, len(p)), ids=p.id.copy(), state=p.state.copy(),
+                stress=p.stress.copy(), x0=p.x - p.u)
+
+
+
+def prandtl_band_length(half_width):
+    """Length of the outer slip line of Prandtl's mechanism under a smooth strip of half-width
+    b (half model): active wedge side b sqrt(2), a circular fan arc of radius b sqrt(2) over
+    pi/2, passive wedge side b sqrt(2): L = b sqrt(2) (2 + pi/2)."""
+    return half_width * math.sqrt(2.0) * (2.0 + 0.5 * math.pi)
+
+
+def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
+                  half_width=0.25, m=2.0, cuts=3):
+    """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
+    axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
+    size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
+    a smooth rigid footing (the top nodes with x <= B/2 moved down, u_x free: displacement
+    control), bottom fixed, rollers on both sides.  Weightless, so Prandtl's (2 + pi) c_u =
+    51.4 kPa is the limit pressure of the soil without softening.  Returns the
+    pressure-settlement curve (p = vertical reaction / (B/2)), the final eps_p field, the band
+    width w = sum_p V_p eps_p / (eps_p,max L), L = prandtl_band_length(B/2), Newton
+    iterations, completed/stop message and the time split (step wall, nonlocal).  A step
+    whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts)."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD if comm is None else comm
+    top = depth + max(2.0 * h, 0.25)               # empty cells above the soil for the heave
+    nx, ny = int(round(width / h)), int(round(top / h))
+    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [width, ny * h]], [nx, ny],
+                                 dmesh.CellType.quadrilateral)
+    grid = Grid(msh)
+    tol = 1e-6 * h
+    pts = Particles.fill(grid, soil(length, m), per_cell=2, region=lambda x: x[:, 1] < depth)
+    under = lambda x: (np.abs(x[:, 1] - depth) < tol) & (x[:, 0] <= half_width + tol)
+    qs = QuasiStatic(displacement=lambda x, t: np.column_stack(
+        [np.zeros(len(x)), np.where(under(x), -settlement * t, 0.0)]))
+    sim = Simulation(grid, pts, qs, dt=1.0 / steps, max_dt_cuts=cuts)
+    sim.fix(lambda x: np.abs(x[:, 1]) < tol)
+    sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - width) < tol), [0])
+    sim.fix(under, [1])
+    own = np.zeros(grid.n_nodes, dtype=bool)
+    own[: grid.n_owned_nodes] = under(grid.node_x[: grid.n_owned_nodes])
+    p = sim.particles
+    s, pr = [0.0], [0.0]
+
+    def record():
+        s.append(settlement * sim.t)
+        pr.append(-_gsum(comm, float(sim.nodal["reaction"][own, 1].sum())) / half_width)
+
+    t0 = time.perf_counter()
+    done, msg = _run(sim, steps, record)
+    wall = _gmax(comm, time.perf_counter() - t0)
+    eps = p.state[:, 0]
+    emax = _gmax(comm, float(eps.max()) if len(p) else 0.0)
+    band = (_gsum(comm, float(np.sum(p.V * eps))) / (emax * prandtl_band_length(half_width))
+            if emax > 0 else 0.0)
+    parts = comm.gather((p.x.copy(), eps.copy()), root=0)
+    return dict(h=h, length=length, settlement=np.array(s), pressure=np.array(pr),
+                completed=done, stopped=msg, band_width=band, eps_max=emax,
+                x=np.concatenate([a for a, _ in parts]) if comm.rank == 0 else None,
+                eps=np.concatenate([b for _, b in parts]) if comm.rank == 0 else None,
+                newton=list(qs.iterations), wall_s=wall,
+                nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
+                n_particles=_gsum(comm, len(p)))
