@@ -259,6 +259,35 @@ class Grid:
         if self.periodic is not None:
             self.periodic.tie(*arrays)
 
+    def ensure_vertex_ring(self):
+        """Give the mesh the vertex ghost layer that shape functions wider than one cell (GIMP,
+        CPDI) need in parallel, when it lacks it (dolfinx's default shared-facet ghosts miss
+        the diagonal neighbours): the mesh is created again from the same cells with the same
+        owners and partitioner=vertex_ghost_partitioner(), and this Grid re-initialised on it
+        (`mesh` is then the new dolfinx mesh; particles must be located again). Collective;
+        returns True when the mesh was rebuilt."""
+        if self.has_vertex_ring():
+            return False
+        from dolfinx import graph
+        msh, tdim, gdim = self.mesh, self.mesh.topology.dim, self.gdim
+        n_own = msh.topology.index_map(tdim).size_local
+        gmap = msh.geometry.index_map()
+        nv = len(msh.geometry.dofmap.links(0)) if n_own else 0
+        nv = self.comm.allreduce(nv, op=__import__("mpi4py").MPI.MAX)
+        dofs = msh.geometry.dofmap.array.reshape(-1, nv)[:n_own]
+        cells = np.asarray(gmap.local_to_global(dofs.ravel()), dtype=np.int64).reshape(n_own, nv)
+        x = np.ascontiguousarray(msh.geometry.x[: gmap.size_local, :gdim])
+
+        def keep_owners(comm, nparts, tdim_, cells_, ghost_mode):
+            n = len(cells_.offsets) - 1
+            return graph.create_adjacencylist(np.full(n, comm.rank, dtype=np.int32),
+                                              np.arange(n + 1, dtype=np.int32))
+
+        new = dolfinx.mesh.create_mesh(self.comm, cells, x, msh.ufl_domain(),
+                                       partitioner=vertex_ghost_partitioner(keep_owners))
+        self.__init__(new, axisymmetric=self.axisymmetric)
+        return True
+
     def reduce_max(self, values, nodes=None):
         """The maximum over ranks of per-node values, (n_nodes,) or (n_nodes, k), or given at
         local `nodes` only: a node shared by ranks gets the largest value any rank has (a

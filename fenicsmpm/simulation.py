@@ -51,8 +51,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     particle's cell), "ugimp"/"cpgimp" (shapes.gimp: structured quadrilateral/hexahedral
     grids), "cpdi1"/"cpdi2" (shapes.cpdi: any 2D P1/Q1 mesh), "gauss" (shapes.gauss_gimp:
     deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
-    P1/Q1 mesh). The wider families need, in
-    parallel, a mesh created with partitioner=grid.vertex_ghost_partitioner(); implicit
+    P1/Q1 mesh). The wider families need, in parallel, the vertex ghost layer: a mesh
+    without it (dolfinx's default partitioner) is rebuilt from the same cells with the same
+    owners (Grid.ensure_vertex_ring; grid.mesh is then a new dolfinx mesh); implicit
     integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings).
     force_integration: "particles" (the internal force as a particle sum), or "mixed" (MPM
     with Gauss-point integration of the internal force, fenicsmpm.integrators.mixed_integration).
@@ -119,8 +120,21 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self._inverted = np.zeros(0, dtype=np.int8)  # flagged by commit, reported by the guards
         self.shape_auto = shape == "auto"
         self.shape, self.shape_reason = resolve_shape(self, shape)
+        if self.shape != "mpm" and grid.ensure_vertex_ring():   # wide families: vertex ghosts
+            self._on_new_mesh()
         self._wide = wide_shape(self, self.shape)        # GIMP/CPDI evaluator; None for "mpm"
         integrator.setup(self)
+
+    def _on_new_mesh(self):
+        """After Grid.ensure_vertex_ring rebuilt the mesh (same cells and owners): locate the
+        particles again and size the nodal arrays for the new numbering (set-up calls that
+        bind nodes come after the constructor)."""
+        g, p, d = self.grid, self.particles, self.gdim
+        p.cell, p.xi = g.locate(p.x)
+        self.fixed = np.zeros((g.n_nodes, d), dtype=bool)
+        if g.axisymmetric:
+            self.fixed[:, 0] = np.abs(g.node_x[:, 0]) <= 1e-9 * g.h
+        self.robin_u = np.zeros((g.n_nodes, d))
 
     @property
     def dt_critical(self):

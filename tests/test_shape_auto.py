@@ -35,14 +35,34 @@ def test_auto_falls_back_with_a_reason():
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit())
     sim.set_periodic(0)
     assert sim.shape == "mpm" and "periodic" in sim.shape_reason
-    sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), ring=False)
-    if not sim.grid.has_vertex_ring():      # dolfinx's default ghosts may lack diagonal cells
-        assert sim.shape == "mpm" and "vertex ghost layer" in sim.shape_reason
-    else:
-        assert sim.shape == "cpgimp"
 
 
 def test_unknown_shape_lists_the_choices():
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit())
     with pytest.raises(ValueError, match="'shape' must be one of .*'auto'"):
         fm.Simulation(sim.grid, sim.particles, fm.Explicit(), dt=1e-4, shape="gimp")
+
+
+@pytest.mark.parametrize("cell_type,shape", [(mesh.CellType.triangle, "auto"),
+                                             (mesh.CellType.triangle, "cpdi2"),
+                                             (mesh.CellType.quadrilateral, "cpgimp")])
+def test_wide_family_on_a_default_partitioned_mesh(cell_type, shape):
+    """A mesh made with dolfinx's default partitioner (on 2 ranks the triangle mesh lacks
+    the diagonal ghost cells) runs a wide family: the Grid rebuilds it with the vertex ghost
+    layer, same cells and owners; the particles and their total mass are kept and a short
+    free fall moves the centre of mass by g dt^2 n (n + 1) / 2 after n symplectic-Euler steps
+    (to round-off)."""
+    msh = mesh.create_rectangle(comm, [[0, 0], [1, 1]], [20, 20], cell_type)
+    grid = fm.Grid(msh)
+    n_cells = grid.comm.allreduce(grid.n_owned_cells)
+    p = fm.Particles.fill(grid, fm.LinearElastic(E=1e6, nu=0.3, density=1e3),
+                          region=lambda x: (x[:, 1] > 0.3) & (x[:, 1] < 0.7))
+    m0, n0, y0 = p.total(p.mass), p.total(np.ones(len(p))), p.total(p.mass * p.x[:, 1])
+    sim = fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape=shape, gravity=(0.0, -10.0))
+    assert sim.shape in ("cpdi2", "cpgimp") and grid.has_vertex_ring()
+    assert grid.comm.allreduce(grid.n_owned_cells) == n_cells
+    sim.run(t_end=0.01)
+    assert p.total(np.ones(len(p))) == n0 and abs(p.total(p.mass) - m0) < 1e-12 * m0
+    drop = (y0 - p.total(p.mass * p.x[:, 1])) / m0
+    n = sim.step_count
+    assert abs(drop - 0.5 * 10.0 * sim.dt ** 2 * n * (n + 1)) < 1e-9 * drop, drop

@@ -16,17 +16,14 @@ def choose_shape(sim):
     grids, CPDI2 on other 2D meshes (triangles, unstructured quadrilaterals). The standard
     family where a wide one is not available: implicit integrators (the wide-stencil implicit
     assembly is several times slower), force_integration="mixed", 3D unstructured meshes (no
-    tetrahedral CPDI yet) and, under MPI, meshes without the vertex ghost layer (create them
-    with partitioner=fenicsmpm.grid.vertex_ghost_partitioner()). Collective."""
+    tetrahedral CPDI yet). Under MPI a mesh without the vertex ghost layer gets it
+    (Grid.ensure_vertex_ring, called by the Simulation). Collective."""
     from .gimp import lattice
     grid = sim.grid
     if not sim.integrator.explicit:
         return "mpm", "implicit integrator (the wide-stencil implicit assembly is several times slower)"
     if sim.force_integration != "particles":
         return "mpm", f"force_integration={sim.force_integration!r} needs the standard family"
-    if not grid.has_vertex_ring():
-        return "mpm", ("the MPI mesh has no vertex ghost layer (create it with "
-                       "partitioner=fenicsmpm.grid.vertex_ghost_partitioner())")
     try:
         lattice(grid)
         return "cpgimp", "structured axis-aligned grid"
