@@ -241,7 +241,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
     except Exception as exc:                 # recorded, not raised: a failing technique is data
         failure = f"{type(exc).__name__}: {exc}"
     wall = common.gmax(comm, wall)
-    n = sim.particles.n_global
+    n = sim.particles.n_global()
     if failure is None:
         if problem == "V2":
             err = v2_current_stress_error(sim, ex)

@@ -101,9 +101,21 @@ def set_body(particles, body_id, region=None):
     b = particles.add_field("body", (), np.int32)
     if fresh:
         b[:] = particles.material_id
-    sel = slice(None) if region is None else np.asarray(region(particles.x), dtype=bool)
+    sel = slice(None) if region is None else np.asarray(region(particles.x))
+    if region is not None and sel.shape != (len(particles),):
+        raise ValueError(f"set_body: 'region(x)' must return one bool per particle, shape "
+                         f"({len(particles)},), got shape {sel.shape}")
+    sel = sel if region is None else sel.astype(bool)
     b[sel] = body_id
     return b
+
+
+def _finite_vector(value):
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return a.ndim == 1 and bool(np.all(np.isfinite(a)))
 
 
 def body_ids(particles):
@@ -385,11 +397,19 @@ class ExplicitContact:
         vals = list(pairs.values()) + ([] if isinstance(mu, dict) else [mu]) + [mu_default]
         for v in vals:
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v >= 0):
-                raise ValueError(f"ExplicitContact: friction coefficients must be finite numbers "
-                                 f">= 0, got {v!r}")
+                raise ValueError(f"ExplicitContact: 'mu' (friction coefficients, and "
+                                 f"'mu_default') must be finite numbers >= 0, got {v!r}")
         self.scheme, self.flip, self.algorithm = scheme, float(flip), algorithm
         self.mu_pairs = {tuple(sorted(k)): float(v) for k, v in pairs.items()}
         self.mu_all = float(mu_default if isinstance(mu, dict) else mu)
+        if rigid is not None and not isinstance(rigid, dict):
+            raise TypeError(f"ExplicitContact: 'rigid' must be a dict {{body: velocity}}, got "
+                            f"{type(rigid).__name__}")
+        for b, law in (rigid or {}).items():
+            if not (isinstance(b, (int, np.integer)) and b >= 0) or not (
+                    callable(law) or _finite_vector(law)):
+                raise ValueError(f"ExplicitContact: 'rigid' maps body ids >= 0 to a velocity "
+                                 f"vector, t -> vector or fm.RigidLoad, got {b!r}: {law!r}")
         self.rigid = dict(rigid or {})
         if gap is not None and not (isinstance(gap, (int, float, np.floating)) and np.isfinite(gap)):
             raise ValueError(f"ExplicitContact: 'gap' must be None or a finite number, got {gap!r}")
@@ -637,8 +657,11 @@ class ExplicitContact:
         vr = self._rigid_velocity(sim.t + dt, d) if self.rigid else np.zeros((nb, d))
         if self.algorithm == "penalty":
             pc.move(sim, present, m_b, v1, self._is_rigid, vr, dt)
+        p.a[:] = p.v                                 # acceleration = (v_new - v_old) / dt
         g2p_bodies(D, sim.nodes, sim.N, body, self._is_rigid, vr, dt, v0, v1, self.flip,
                    p.x, p.v, p.u)
+        np.subtract(p.v, p.a, out=p.a)
+        p.a /= dt
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1

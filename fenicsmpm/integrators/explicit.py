@@ -96,7 +96,10 @@ class Explicit:
             fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
+        p.a[:] = p.v                                 # acceleration = (v_new - v_old) / dt
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
+        np.subtract(p.v, p.a, out=p.a)
+        p.a /= dt
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
