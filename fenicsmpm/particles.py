@@ -230,12 +230,15 @@ class Particles:
         return self.grid.comm.allreduce(s) if self.grid.comm.size > 1 else s
 
     def kinetic_energy(self):
+        """Global kinetic energy sum m v.v / 2 (collective)."""
         return float(self.total(0.5 * self.mass * np.einsum("pi,pi->p", self.v, self.v)))
 
     def strain_energy(self):
+        """Global accumulated stress work (strain energy) of the particles (collective)."""
         return float(self.total(self.work))
 
     def momentum(self):
+        """Global momentum sum m v, a vector of length gdim (collective)."""
         return self.total(self.mass[:, None] * self.v)
 
 

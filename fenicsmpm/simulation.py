@@ -228,11 +228,13 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         return m, mv
 
     def nodal_mass(self):
+        """Local nodal mass (not yet summed over ranks)."""
         m = np.zeros(self.grid.n_nodes)
         kt.p2g_mass(self.nodes, self.N, self.particles.mass, m)
         return m
 
     def nodal_weighted(self, q):
+        """Local nodal sums sum_p N_ip m_p q_p of a per-particle quantity q (not yet summed over ranks)."""
         out = np.zeros((self.grid.n_nodes, self.gdim))
         kt.p2g_weighted(self.grid.D, self.nodes, self.N, self.particles.mass, q, out)
         return out
@@ -416,9 +418,6 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                           f"{mats.index(m)}, c_p = {m.p_wave_speed:.4g} m/s, h = "
                           f"{self.grid.h:.4g}); check the units, or use an implicit integrator",
                           RuntimeWarning, stacklevel=3)
-        if self.on_leave == "periodic" and self.grid.periodic is None:
-            raise ValueError("Simulation: on_leave='periodic' needs periodic sides "
-                             "(sim.set_periodic(axis))")
         if not self.integrator.explicit:
             return
         v = self.particles.v

@@ -94,6 +94,7 @@ class InputMotion:
 
     @classmethod
     def from_file(cls, path, kind="acceleration", baseline=1, scale=1.0):
+        """A motion from a two-column text file (time, value); see the class docstring."""
         txt = open(path).read().replace(",", " ")
         data = np.loadtxt(txt.splitlines(), comments="#")
         if data.ndim != 2 or data.shape[1] != 2:
@@ -102,6 +103,7 @@ class InputMotion:
 
     @classmethod
     def from_callable(cls, f, t_end, dt, kind="acceleration", baseline=1, scale=1.0):
+        """A motion sampled from f(t) on [0, t_end] every dt; see the class docstring."""
         if not callable(f):
             raise TypeError("InputMotion.from_callable: 'f' must be callable f(t) -> value")
         t = np.arange(int(math.floor(t_end / dt + 1e-9)) + 1) * dt
@@ -111,12 +113,15 @@ class InputMotion:
         return np.interp(s, self.t, y, left=0.0, right=0.0)
 
     def acceleration(self, s):
+        """Base acceleration at time s (0 outside the record)."""
         return self._at(self.a, s)
 
     def velocity(self, s):
+        """Base velocity at time s (0 outside the record)."""
         return self._at(self.v, s)
 
     def displacement(self, s):
+        """Base displacement at time s (0 before the record, held after it)."""
         return np.interp(s, self.t, self.u, left=0.0)
 
 

@@ -459,6 +459,7 @@ class ExplicitContact:
         self._penalty = None
 
     def setup(self, sim):
+        """Check the scene before the first step (integrator protocol: called once)."""
         if sim.layers:
             raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
         if sim.force_integration != "particles":
@@ -584,6 +585,7 @@ class ExplicitContact:
 
     # ------------------------------------------------------------------ step
     def step(self, sim, dt):
+        """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         if sim.layers:
             raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
         p, grid, T = sim.particles, sim.grid, sim.timers

@@ -21,6 +21,10 @@ SCHEMES = ("USF", "USL", "MUSL", "AVG")
 
 
 class Explicit:
+    """Explicit symplectic-Euler MPM with the update order `scheme` ("USF", "USL", "MUSL",
+    "AVG"; module docstring) and the FLIP/PIC blend `flip` (1: FLIP, 0: PIC) for particle
+    velocities. Needs dt below the critical step (dt="auto" gives cfl * h / c_p). Fills the
+    particle acceleration a = (v_new - v_old) / dt."""
     explicit = True
     records_work = True
     supports_friction = True
@@ -34,6 +38,7 @@ class Explicit:
         self.scheme, self.flip = scheme, float(flip)
 
     def setup(self, sim):
+        """Nothing to prepare (integrator protocol: Simulation calls setup(sim) once)."""
         pass
 
     def _grid_velocity(self, momentum, inv_m, free):
@@ -61,6 +66,7 @@ class Explicit:
         sim.commit(dF)
 
     def step(self, sim, dt):
+        """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
         t0 = time.perf_counter()

@@ -51,6 +51,7 @@ class _Newton:
         self.ksp_iterations = 0
 
     def setup(self, sim):
+        """Build the PETSc linear system on the grid (integrator protocol: called once)."""
         shape = getattr(sim, "shape", "mpm")        # wide shapes: a pattern over cell rings
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape)
@@ -197,6 +198,7 @@ class Newmark(_Newton):
         self.beta, self.gamma = float(beta), float(gamma)
 
     def step(self, sim, dt):
+        """Advance `sim` by dt with Newton (integrator protocol: called by Simulation.step)."""
         p, grid = sim.particles, sim.grid
         b, g = self.beta, self.gamma
         sim.locate_and_shape()
@@ -273,6 +275,7 @@ class QuasiStatic(_Newton):
         self.load_steps = load_steps
 
     def step(self, sim, dt):
+        """Advance `sim` by dt with Newton (integrator protocol: called by Simulation.step)."""
         p, grid = sim.particles, sim.grid
         sim.locate_and_shape()
         m = sim.nodal_mass()

@@ -103,6 +103,7 @@ class Probe:
         return list(arr)
 
     def record(self):
+        """Append the current values (every `every` steps; called by Simulation.step)."""
         if self.sim.step_count % self.every:
             return
         p = self.sim.particles

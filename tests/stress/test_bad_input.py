@@ -281,8 +281,6 @@ CASES = [
     ("add_friction-implicit", lambda: sim(fm.Newmark()).add_friction(bottom, 0.3),
      NotImplementedError, r"add_friction: frictional boundaries need fm.Explicit"),
     ("set_periodic-axis", lambda: sim().set_periodic(axis=5), ValueError, r"'axis'"),
-    ("on_leave-periodic-without-sides", lambda: sim(on_leave="periodic").run(steps=1),
-     ValueError, r"Simulation: on_leave='periodic' needs periodic sides"),
     # ---- tractions and particle loads
     ("add_traction-length", lambda: sim().add_traction(top, (0.0, 1.0, 2.0)), ValueError,
      r"add_traction #0: 'value' must give a vector of length 2, got shape \(3,\)"),
