@@ -591,6 +591,7 @@ class ExplicitContact:
         p, grid, T = sim.particles, sim.grid, sim.timers
         D, d = grid.D, sim.gdim
         sim.locate_and_shape()
+        p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
         body = self._bodies(sim)                     # after migration
         self._friction_gaps(sim, body)
         nb, nn = self.nb, grid.n_nodes
@@ -659,11 +660,8 @@ class ExplicitContact:
         vr = self._rigid_velocity(sim.t + dt, d) if self.rigid else np.zeros((nb, d))
         if self.algorithm == "penalty":
             pc.move(sim, present, m_b, v1, self._is_rigid, vr, dt)
-        p.a[:] = p.v                                 # acceleration = (v_new - v_old) / dt
         g2p_bodies(D, sim.nodes, sim.N, body, self._is_rigid, vr, dt, v0, v1, self.flip,
                    p.x, p.v, p.u)
-        np.subtract(p.v, p.a, out=p.a)
-        p.a /= dt
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
@@ -700,3 +698,5 @@ class ExplicitContact:
         if sim.robin is not None:
             sim.robin_u += dt * vcm
         sim.nodal = dict(mass=m, velocity=vcm, active=active, body_mass=m_b, body_velocity=v1)
+        np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
+        p.a /= dt

@@ -69,6 +69,7 @@ class Explicit:
         """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
+        p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
         t0 = time.perf_counter()
         self._gaps = [b.gaps(sim) for b in sim.frictions]
         m, mv = sim.nodal_mass_momentum()
@@ -102,10 +103,7 @@ class Explicit:
             fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
-        p.a[:] = p.v                                 # acceleration = (v_new - v_old) / dt
         kt.g2p(sim.grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
-        np.subtract(p.v, p.a, out=p.a)
-        p.a /= dt
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
@@ -121,3 +119,5 @@ class Explicit:
         if sim.robin is not None:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active)
+        np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
+        p.a /= dt
