@@ -38,7 +38,6 @@ class Explicit:
         self.scheme, self.flip = scheme, float(flip)
 
     def setup(self, sim):
-        """Nothing to prepare (integrator protocol: Simulation calls setup(sim) once)."""
         pass
 
     def _grid_velocity(self, momentum, inv_m, free):
