@@ -14,7 +14,8 @@ plateau to x = 30. The slope surface is a line of the gmsh model shared by two s
 "soil" (physical group 1) and "air" (physical group 2), so the mesh follows the surface
 exactly: every cell is entirely soil or air, and `Particles.fill` with a region given by the
 cell tags places 9 particles (per_cell=3: the centroids of 9 congruent sub-triangles) in
-every soil cell and none in the air, where the soil can run out. Element size H_MESH (1.0 m; --quick 1.5 m).
+every soil cell and none in the air, where the soil can run out. Element size 1.0 m
+(--quick: 1.5 m).
 
 Soil: fm.MohrCoulomb(E = 10 MPa, nu = 0.3, rho = 2000 kg/m^3, phi = 20 deg, c = 2 kPa,
 psi = 0), from a K0 state (fenicsmpm.materials.initial_stress.k0_stress below the ground
