@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 DEBS := python3-dolfinx python3-petsc4py python3-mpi4py python3-meshio python3-numba \
         python3-scipy python3-matplotlib python3-pytest python3-setuptools python3-wheel python3-venv \
-        mpi-default-bin
+        mpi-default-bin python3-sphinx python3-myst-parser python3-sphinx-rtd-theme python3-gmsh
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 MPI_ROOT := $(shell [ "$$(id -u)" = 0 ] && echo --allow-run-as-root)
 NP ?= 2
@@ -13,7 +13,7 @@ MPIRUN := mpirun $(MPI_ROOT) -n $(NP)
 export OMPI_MCA_rmaps_base_oversubscribe = 1
 export OMPI_MCA_btl_vader_single_copy_mechanism = none
 
-.PHONY: all deps venv test test-serial test-mpi demo bench clean
+.PHONY: all deps venv test test-serial test-mpi docs demo bench clean
 
 all: test
 
@@ -39,12 +39,18 @@ venv: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m pytest -q --color=no tests
 	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
+	$(MAKE) --no-print-directory docs
 
 test-serial: $(VENV)/.installed
 	$(PY) -m pytest -q --color=no tests
 
 test-mpi: $(VENV)/.installed
 	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
+
+# The documentation site (docs/): warnings are errors; HTML in docs/_build/html.
+docs: $(VENV)/.installed
+	$(PY) -m sphinx -W --keep-going -q -b html docs docs/_build/html
+	@echo "[make] docs: open docs/_build/html/index.html"
 
 demo: $(VENV)/.installed
 	$(PY) demos/vibrating_bar.py
@@ -53,4 +59,4 @@ bench: $(VENV)/.installed
 	$(PY) -m fenicsmpm.bench $(CASE)
 
 clean:
-	rm -rf $(VENV) results bench-results *.egg-info
+	rm -rf $(VENV) results bench-results *.egg-info docs/_build docs/_generated

@@ -127,7 +127,7 @@ def main(argv=None):
     sim, soil = build(h, dt)
     p = sim.particles
     mass0 = comm.allreduce(float(np.sum(p.mass)))
-    n0 = p.n_global
+    n0 = p.n_global()
     hist = [(0.0, mean_speed(sim))]
     det_min = [np.inf]
 
@@ -165,7 +165,7 @@ def main(argv=None):
                             op=MPI.LAND)
     data = gather(p.x, p.state[:, 0])
     metrics = dict(h=h, dt=dt, t_end=float(sim.t), steps=sim.step_count, n_particles=n0,
-                   n_particles_final=p.n_global, mass_initial=mass0, mass_final=mass1,
+                   n_particles_final=p.n_global(), mass_initial=mass0, mass_final=mass1,
                    runout=0.5 * (runout_l + runout_r), runout_left=runout_l,
                    runout_right=runout_r, height=top, peak_mean_speed=float(s[k]),
                    t_peak=float(t[k]), final_mean_speed=float(s[-1]), t_stop=t_stop,

@@ -72,7 +72,7 @@ def run_base(base, dx, width, t_end):
     s = summary(sim, exact)
     top = hist[0.0]
     s.update(base=base, wall_s=wall, steps=sim.step_count, dt=sim.dt,
-             n_particles=sim.particles.n_global,
+             n_particles=sim.particles.n_global(),
              top_peak_stress=float(np.max(np.abs(top["stress"][top["t"] < 0.2]))))
     return dict(summary=s, hist=hist, exact=exact)
 

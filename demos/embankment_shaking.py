@@ -219,7 +219,7 @@ def main(argv=None):
     sim, soil, probes = build(h, motion, args.scheme)
     p = sim.particles
     mass0 = comm.allreduce(float(np.sum(p.mass)))
-    n0 = p.n_global
+    n0 = p.n_global()
     n_emb = comm.allreduce(int(np.count_nonzero(p.material_id == 1)))
     stats = dict(max_wrapped=0, det_min=np.inf, state_err=0.0)
 
@@ -270,7 +270,7 @@ def main(argv=None):
     eps_f = p.state[p.material_id == 0, 0] if p.state.shape[1] else np.zeros(0)
     metrics = dict(h=h, face=X_FACE, scheme=args.scheme, dt=sim.dt, steps=sim.step_count, t_static=t_s, t_shake_end=t_shake,
                    t_end=float(sim.t), amplitude_g=args.amplitude, frequency=FREQ, cycles=cycles,
-                   n_particles=n0, n_particles_final=p.n_global, n_embankment=n_emb,
+                   n_particles=n0, n_particles_final=p.n_global(), n_embankment=n_emb,
                    mass_initial=mass0, mass_final=mass1, finite=finite, min_det_F=stats["det_min"],
                    max_wrapped=stats["max_wrapped"], n_crossed_final=n_crossed,
                    wrap_state_error=stats["state_err"], all_inside=inside,

@@ -132,7 +132,7 @@ def main(argv=None):
     below = soil & (np.abs(p.x[:, 0]) < 2 * R_PILE) & (p.x[:, 1] < H_SOIL - depth) & (p.x[:, 1] > H_SOIL - depth - 1.0)
     szz_tip = comm.allreduce(float(p.stress[below, 1, 1].min()) if np.any(below) else 0.0, op=MPI.MIN)
     res = dict(h=h, dt=sim.dt, steps=sim.step_count, wall_s=wall,
-               n_particles=p.n_global, penetration=depth, resistance=float(np.mean(F[-5:])),
+               n_particles=p.n_global(), penetration=depth, resistance=float(np.mean(F[-5:])),
                shaft_estimate=shaft, tip_estimate=tip, sigma_v_base=sv,
                sigma_v_base_exact=-RHO * G * (H_SOIL - 0.25 * h), sigma_zz_below_tip=szz_tip)
     # the final stress field for the plot: only the plotted window near the pile goes to rank 0

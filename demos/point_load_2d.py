@@ -175,7 +175,7 @@ def run_base(base, dx, t_end):
     def at(ts):
         return float(np.interp(ts, t, top["displacement_y"]))
 
-    s = dict(base=base, wall_s=wall, steps=sim.step_count, n_particles=sim.particles.n_global,
+    s = dict(base=base, wall_s=wall, steps=sim.step_count, n_particles=sim.particles.n_global(),
              newton_iterations=float(np.mean(sim.integrator.iterations)),
              u_max_025=info["umax_0.25"], u_load_025=at(0.25), u_load_100=at(1.0),
              u_load_peak=float(np.min(top["displacement_y"])),

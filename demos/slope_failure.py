@@ -112,7 +112,7 @@ def run_factor(factor, cells, t_ramp, t_hold, keep=False):
     out = dict(factor=float(factor), phi=soil.phi, c=soil.c, failed=bool(u_hold > U_FAIL),
                crest_u_hold=u_hold,
                mean_speed_tail=v_tail, mean_speed_final=float(v[-1]), crest_u=u_crest,
-               steps=sim.step_count, dt=sim.dt, n_particles=sim.particles.n_global,
+               steps=sim.step_count, dt=sim.dt, n_particles=sim.particles.n_global(),
                wall_s=wall, t=t, v=v)
     if keep:
         p = sim.particles

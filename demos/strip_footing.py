@@ -164,7 +164,7 @@ def run_base(base, dx, t_end, length=None):
     zone = eps > PLASTIC
     depth = comm.allreduce(float((H - x0[zone, 1]).max()) if np.any(zone) else 0.0, op=MPI.MAX)
     parts = comm.gather((p.x, eps), root=0)
-    res = dict(base=base, dx=dx, n_particles=p.n_global, sigma_v_base=s_base,
+    res = dict(base=base, dx=dx, n_particles=p.n_global(), sigma_v_base=s_base,
                sigma_v_base_exact=-RHO * G * (H - 0.25 * dx), sigma_v_error=err_max,
                static_newton=static_newton, static_settlement=u_static,
                static_settlement_exact=u_static_exact,

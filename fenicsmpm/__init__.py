@@ -34,7 +34,11 @@ from .boundaries import ParticleLayer, Robin, Viscous, Viscoelastic
 from .boundaries import CompliantBase, InputMotion, compliant_base, rigid_base
 from .simulation import Simulation
 from .io import Probe, Output
+from .errors import CheckpointNotFoundError, ParticlesLeftMesh
+from .compiler_log import silence_compiler_output
 from . import partition
+
+silence_compiler_output()
 
 __version__ = "0.1.0"
 
@@ -63,3 +67,5 @@ __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
 __all__ += ["CompliantBase", "InputMotion", "compliant_base", "rigid_base"]
 __all__ += ["ExplicitContact", "RigidLoad", "set_body"]
 __all__ += ["Hypoplastic"]
+__all__ += ["DoubleMappingNewmark", "DoubleMappingQuasiStatic"]
+__all__ += ["ParticlesLeftMesh", "CheckpointNotFoundError"]

@@ -24,6 +24,8 @@ import shutil
 
 import numpy as np
 
+from .errors import CheckpointNotFoundError
+
 FORMAT = 1
 
 
@@ -69,7 +71,7 @@ def write(sim, path, keep=1):
     meta = dict(format=FORMAT, t=sim.t, step_count=sim.step_count, dt=sim.dt,
                 stage_start=sim.stage_start, initial_stress=sim.initial_stress,
                 gravity=sim.gravity.tolist(), integrator=type(sim.integrator).__name__,
-                ranks=comm.size, gdim=sim.gdim, n_particles=p.n_global,
+                ranks=comm.size, gdim=sim.gdim, n_particles=p.n_global(),
                 n_nodes=grid.V.dofmap.index_map.size_global,
                 materials=[type(m).__name__ for m in p.materials],
                 optional=list(p.optional), n_probes=len(sim.probes),
@@ -99,9 +101,14 @@ def _latest(path, comm):
     if comm.size > 1:
         name = comm.bcast(name, root=0)
     if name is None:
-        raise FileNotFoundError(f"restore: no checkpoint in {path!r} (missing {path}/LATEST)")
+        raise CheckpointNotFoundError(f"restore: no checkpoint in {path!r} (missing "
+                                      f"{os.path.join(path, 'LATEST')})")
     folder = os.path.join(path, name)
-    with open(os.path.join(folder, "meta.json")) as f:
+    meta = os.path.join(folder, "meta.json")
+    if not os.path.isfile(meta):
+        raise CheckpointNotFoundError(f"restore: the checkpoint {folder!r} named by "
+                                      f"{os.path.join(path, 'LATEST')} is incomplete (missing {meta})")
+    with open(meta) as f:
         return folder, json.load(f)
 
 
@@ -187,6 +194,8 @@ class CheckpointMixin:
         """Save the complete state under directory `path` (collective; see fenicsmpm.checkpoint):
         particles with history variables, integrator and boundary state, stage, time, step and
         probe records. Written atomically; the `keep` newest checkpoints are kept."""
+        if isinstance(keep, bool) or not (isinstance(keep, (int, np.integer)) and keep >= 1):
+            raise ValueError(f"checkpoint: 'keep' must be a positive integer, got {keep!r}")
         return write(self, str(path), keep)
 
     def restore(self, path):

@@ -39,25 +39,38 @@ class EnergyMixin:
         if f_boundary is not None:
             self._work[1] += dt * float(np.einsum("ij,ij->", f_boundary[:n], vm))
 
-    def monitor_energy(self, every=10, tolerance=0.02, path=None):
+    def monitor_energy(self, every=10, tolerance=0.02, path=None, warmup=20):
         """Track the energy balance E_kin + E_strain - W_ext - W_boundary = E_0 every `every`
         steps (history in `energy_history`, CSV at `path`) and warn, once, when its error
-        exceeds `tolerance` times the largest energy seen. fm.Explicit and fm.Newmark record
-        the external and boundary work; other integrators raise a ValueError here."""
+        exceeds `tolerance` times the scale.
+
+        Scale: the largest of E_kin + E_strain, |W_ext| and |W_boundary| seen so far (so the
+        balance error is a fraction of the work put in, or of the energy the body started
+        with). The warning is armed only after `warmup` steps from the start of monitoring:
+        in the first steps of a suddenly applied load the energies are tiny and the mapping
+        between grid and particles makes the balance error tens of percent of them (measured
+        -27.6 % at step 1, +5.4 % at step 5 and +1.5 % at step 20 on a point load,
+        tests/test_energy_monitor.py). `balance_error` is recorded from the start.
+
+        fm.Explicit, fm.ExplicitContact and fm.Newmark (implicit, trapezoidal work) record the
+        external and boundary work; other integrators raise a ValueError here."""
         if not getattr(self.integrator, "records_work", False):
             raise ValueError(f"monitor_energy: {type(self.integrator).__name__} does not record "
                              f"the work of external and boundary forces")
-        if not (isinstance(every, (int, np.integer)) and every >= 1):
+        if isinstance(every, bool) or not (isinstance(every, (int, np.integer)) and every >= 1):
             raise ValueError(f"monitor_energy: 'every' must be a positive integer, got {every!r}")
-        if not (tolerance > 0):
+        if not (isinstance(tolerance, (int, float, np.floating)) and tolerance > 0):
             raise ValueError(f"monitor_energy: 'tolerance' must be > 0, got {tolerance!r}")
+        if isinstance(warmup, bool) or not (isinstance(warmup, (int, np.integer)) and warmup >= 0):
+            raise ValueError(f"monitor_energy: 'warmup' must be a non-negative integer, got "
+                             f"{warmup!r}")
         self._work = np.zeros(2)
         self.energy_history = []
         writer = None
         if path is not None:
             writer = ProbeWriter(path, ["t", "kinetic", "strain", "external_work",
                                         "boundary_work", "balance_error"], self.comm)
-        state = dict(e0=None, scale=0.0, warned=False)
+        state = dict(e0=None, scale=0.0, warned=False, armed_at=self.step_count + warmup)
 
         def check(sim):
             e = sim.energy()
@@ -71,11 +84,11 @@ class EnergyMixin:
             sim.energy_history.append(e)
             if writer is not None and sim.comm.rank == 0:
                 writer.write_row(e)
-            if abs(err) > tolerance and not state["warned"]:
+            if abs(err) > tolerance and not state["warned"] and sim.step_count >= state["armed_at"]:
                 state["warned"] = True
                 if sim.comm.rank == 0:
                     warnings.warn(f"step {sim.step_count}, t = {sim.t:.6g}: energy balance error "
-                                  f"{err:.3%} of the largest energy exceeds {tolerance:.3%}",
+                                  f"{err:.3%} of the largest energy or work exceeds {tolerance:.3%}",
                                   RuntimeWarning, stacklevel=2)
 
         check(self)

@@ -8,10 +8,8 @@ import warnings
 import numpy as np
 from numba import njit
 
+from .errors import ParticlesLeftMesh
 from .materials.piola import det3
-
-class ParticlesLeftMesh(RuntimeError):
-    """Particles left the mesh (raised before the step changed any state)."""
 
 
 FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")

@@ -14,7 +14,7 @@ from .shapes import standard as ks
 FIELDS = {
     "x": (lambda d: (d,), np.float64),        # position
     "v": (lambda d: (d,), np.float64),        # velocity
-    "a": (lambda d: (d,), np.float64),        # acceleration (implicit integrators)
+    "a": (lambda d: (d,), np.float64),        # acceleration (every integrator; explicit: (v_new - v_old) / dt)
     "u": (lambda d: (d,), np.float64),        # displacement since creation
     "mass": (lambda d: (), np.float64),
     "V0": (lambda d: (), np.float64),         # initial volume
@@ -89,8 +89,14 @@ class Particles:
     def __len__(self):
         return len(self.x)
 
-    @property
     def n_global(self):
+        """The number of particles on all ranks.
+
+        Collective: under MPI it is a reduction over the grid's communicator, so every rank
+        must call it, at the same point of the script (never inside `if rank == 0:`, where
+        the other ranks would not join and rank 0 would wait for ever). Call it on every rank
+        and print on one: `n = p.n_global(); if rank == 0: print(n)`. `len(p)` is the local
+        count (no communication)."""
         n = len(self)
         return self.grid.comm.allreduce(n) if self.grid.comm.size > 1 else n
 
@@ -101,7 +107,7 @@ class Particles:
 
         region(x) -> bool (x of shape (n, gdim)) keeps a subset; velocity is a constant
         vector or a callable velocity(x) -> (n, gdim)."""
-        if not isinstance(per_cell, (int, np.integer)) or per_cell < 1:
+        if isinstance(per_cell, bool) or not isinstance(per_cell, (int, np.integer)) or per_cell < 1:
             raise ValueError(f"Particles.fill: 'per_cell' must be a positive integer, got {per_cell!r}")
         _check_material(material)
         ref, w = _reference_points(grid.cell_type, int(per_cell))
@@ -113,7 +119,14 @@ class Particles:
         ks.reference_points_to_physical(grid.kind, cells, xi, grid.cell_nodes, grid.node_x, x, detJ)
         vol = detJ * np.tile(w, nc)
         if region is not None:
-            keep = np.asarray(region(x), dtype=bool)
+            if not callable(region):
+                raise TypeError(f"Particles.fill: 'region' must be a function region(x) -> "
+                                f"bool array, got {type(region).__name__}")
+            keep = np.asarray(region(x))
+            if keep.shape != (len(x),):
+                raise ValueError(f"Particles.fill: 'region(x)' must return one bool per point, "
+                                 f"shape ({len(x)},), got shape {keep.shape}")
+            keep = keep.astype(bool)
             cells, xi, x, vol = cells[keep], xi[keep], x[keep], vol[keep]
         if grid.global_count(np.ones(len(x), bool)) == 0:
             raise ValueError("Particles.fill: the region selects no particle")
@@ -121,17 +134,21 @@ class Particles:
 
     @classmethod
     def from_points(cls, grid, material, x, volume, velocity=None):
-        """Particles at given points (n, gdim) with given volumes (scalar or (n,); meridian
-        areas on an axisymmetric grid)."""
+        """Particles at given points `x`, an (n, gdim) array, with given volumes `volume` (a
+        number, or an (n,) array; meridian areas on an axisymmetric grid). Each point goes to
+        the rank that owns its cell; points outside the mesh raise a ValueError. Collective:
+        every rank passes its own points (possibly none)."""
         _check_material(material)
-        x = np.ascontiguousarray(np.atleast_2d(np.asarray(x, dtype=np.float64)))
-        if x.shape[1] != grid.gdim:
-            raise ValueError(f"Particles.from_points: 'x' must have shape (n, {grid.gdim}), "
-                             f"got {x.shape}")
-        vol = np.broadcast_to(np.asarray(volume, dtype=np.float64), (len(x),)).copy()
-        if np.any(~np.isfinite(vol)) or np.any(vol <= 0):
-            bad = vol[~(vol > 0)][0] if np.any(~(vol > 0)) else vol[~np.isfinite(vol)][0]
-            raise ValueError(f"Particles.from_points: 'volume' must be > 0, got {bad}")
+        x = _point_array(x, grid.gdim, "Particles.from_points", "x", grid)
+        vol = np.asarray(volume, dtype=np.float64) if _is_numeric(volume) else None
+        if vol is None or vol.ndim > 1 or (vol.ndim == 1 and vol.shape != (len(x),)):
+            raise ValueError(f"Particles.from_points: 'volume' must be a number or an array of "
+                             f"one volume per point, shape ({len(x)},), got "
+                             f"{np.shape(volume) if vol is not None else type(volume).__name__}")
+        vol = np.broadcast_to(vol, (len(x),)).copy()
+        if np.any(~(vol > 0)) or np.any(~np.isfinite(vol)):
+            bad = vol[~(np.isfinite(vol) & (vol > 0))][0]
+            raise ValueError(f"Particles.from_points: 'volume' must be finite and > 0, got {bad}")
         cells, xi = grid.locate(x)
         p = cls._create(grid, material, x, vol, cells, xi, velocity)
         ids, xs = p.send_to_owners()
@@ -151,7 +168,13 @@ class Particles:
             vol = vol * x[:, 0]
         v = np.zeros((n, grid.gdim))
         if velocity is not None:
-            v[:] = velocity(x) if callable(velocity) else np.asarray(velocity, dtype=np.float64)
+            val = velocity(x) if callable(velocity) else velocity
+            shapes = ((grid.gdim,), (n, grid.gdim)) if callable(velocity) else ((grid.gdim,),)
+            if not _is_numeric(val) or np.shape(val) not in shapes:
+                raise ValueError(f"Particles: 'velocity' must be a vector of length {grid.gdim} "
+                                 f"or a function velocity(x) -> ({n}, {grid.gdim}) array, got "
+                                 f"{'shape ' + str(np.shape(val)) if _is_numeric(val) else repr(val)}")
+            v[:] = np.asarray(val, dtype=np.float64)
             n_bad = grid.global_count(~np.isfinite(v).all(axis=1))     # collective
             if n_bad:
                 raise ValueError(f"Particles: 'velocity' must be finite, got non-finite values "
@@ -207,13 +230,47 @@ class Particles:
         return self.grid.comm.allreduce(s) if self.grid.comm.size > 1 else s
 
     def kinetic_energy(self):
+        """Global kinetic energy sum m v.v / 2 (collective)."""
         return float(self.total(0.5 * self.mass * np.einsum("pi,pi->p", self.v, self.v)))
 
     def strain_energy(self):
+        """Global accumulated stress work (strain energy) of the particles (collective)."""
         return float(self.total(self.work))
 
     def momentum(self):
+        """Global momentum sum m v, a vector of length gdim (collective)."""
         return self.total(self.mass[:, None] * self.v)
+
+
+def _is_numeric(value):
+    """Whether np.asarray(value) is a regular array of real numbers."""
+    try:
+        a = np.asarray(value)
+    except ValueError:                  # ragged nested sequences (numpy >= 1.24)
+        return False
+    return a.dtype != object and (np.issubdtype(a.dtype, np.number) or a.dtype == bool) \
+        and not np.iscomplexobj(a)
+
+
+def _point_array(x, gdim, owner, name, grid=None):
+    """x as a contiguous (n, gdim) float array; a ValueError naming `name` for ragged, wrongly
+    shaped, non-numeric (this rank's points) or non-finite input (on any rank, when `grid` is
+    given: then every rank raises)."""
+    if not _is_numeric(x):
+        raise ValueError(f"{owner}: '{name}' must be an array of points of shape (n, {gdim}), "
+                         f"got a ragged or non-numeric {type(x).__name__}")
+    a = np.asarray(x, dtype=np.float64)
+    if a.ndim == 1 and a.shape[0] == gdim:
+        a = a[None, :]
+    if a.ndim != 2 or a.shape[1] != gdim:
+        raise ValueError(f"{owner}: '{name}' must have shape (n, {gdim}), got {a.shape}")
+    bad = ~np.isfinite(a).all(axis=1)
+    n_bad = grid.global_count(bad) if grid is not None else int(np.count_nonzero(bad))
+    if n_bad:
+        first = f", first {tuple(a[bad][0])}" if np.any(bad) else ""
+        raise ValueError(f"{owner}: '{name}' must be finite, got {n_bad} point(s) with NaN or "
+                         f"inf coordinates{first}")
+    return np.ascontiguousarray(a)
 
 
 def _check_material(material):

@@ -41,17 +41,25 @@ class SetupMixin:
         f_i += sum_p N_ip value(t) / n. Unlike a facet traction it follows the material (the
         thesis's point load "applied to the top material points"). Returns the global number
         of loaded particles."""
-        if not (callable(region) and (callable(value) or np.ndim(value) == 1)):
-            raise TypeError("add_particle_load: need region(x) -> bool and a vector or t -> vector")
+        name = f"add_particle_load #{len(self.particle_loads)}"
+        if not callable(region):
+            raise TypeError(f"{name}: 'region' must be a function region(x) -> bool, got "
+                            f"{type(region).__name__}")
+        load = Traction(lambda x: True, value, name=name)
+        load.at(self.t, self.gdim, nonfinite=ValueError)
         p = self.particles
-        sel = np.asarray(region(p.x), dtype=bool)
+        sel = np.asarray(region(p.x))
+        if sel.shape != (len(p),):
+            raise ValueError(f"{name}: 'region(x)' must return one bool per particle, shape "
+                             f"({len(p)},), got shape {sel.shape}")
+        sel = sel.astype(bool)
         n = int(np.count_nonzero(sel))
         n = self.comm.allreduce(n) if self.comm.size > 1 else n
         if n == 0:
-            raise ValueError("add_particle_load: 'region' selects no particle")
-        name = f"load_share_{len(self.particle_loads)}"
-        p.add_field(name)[sel] = 1.0 / n
-        self.particle_loads.append((name, Traction(lambda x: True, value)))
+            raise ValueError(f"{name}: 'region' selects no particle")
+        field = f"load_share_{len(self.particle_loads)}"
+        p.add_field(field)[sel] = 1.0 / n
+        self.particle_loads.append((field, load))
         return n
 
     def _particle_load_force(self, t, out):
@@ -84,6 +92,9 @@ class SetupMixin:
         gravity_ramp: ramp time T of this stage's gravity (see Simulation), None: no ramp."""
         p = self.particles
         if integrator is not None:
+            if not all(hasattr(integrator, a) for a in ("explicit", "setup", "step")):
+                raise TypeError(f"start_stage: 'integrator' must be an integrator such as "
+                                f"fm.Newmark(), got {integrator!r}")
             if self.frictions and not getattr(integrator, "supports_friction", False):
                 raise NotImplementedError("start_stage: frictional boundaries need fm.Explicit, "
                                           f"not {type(integrator).__name__}")
@@ -151,8 +162,14 @@ class SetupMixin:
         return self.splitting
 
     def add_traction(self, where, value):
-        """Traction (force per area) on boundary facets where(x); value: vector or t -> vector."""
-        self.tractions.append(Traction(where, value))
+        """Traction (force per area) on boundary facets where(x); value: vector or t -> vector.
+        Checked now: the locator must select a boundary facet and value(t) at the current
+        time must be a finite vector of length gdim (a non-finite value later stops the run
+        with a FloatingPointError naming the traction and the time)."""
+        tr = Traction(where, value, name=f"add_traction #{len(self.tractions)}")
+        facets_on_boundary(self.grid, where, tr.name)
+        tr.at(self.t, self.gdim, nonfinite=ValueError)
+        self.tractions.append(tr)
         self._traction_forms = None
 
     def add_boundary(self, boundary):
@@ -192,7 +209,12 @@ class SetupMixin:
         self.observers.append((callback, int(every)))
 
     def probe(self, point, fields=("velocity",), path=None, every=1):
-        """Record fields of the particle nearest to `point` (by its initial position)."""
+        """Record `fields` ("velocity", "displacement", "position", "stress", "acceleration")
+        of the particle whose initial position is nearest to `point` (which must lie in the
+        mesh), every `every` steps; CSV at `path`. Returns the fm.Probe: `str(probe)` names the
+        particle it follows (id, initial position); `probe.data()` (collective) the series.
+        "acceleration" is (v_new - v_old) / dt of the particle with explicit integrators and
+        the Newmark/generalized-alpha particle acceleration with implicit ones."""
         pr = Probe(self, point, fields, path, every)
         self.probes.append(pr)
         return pr

@@ -9,6 +9,7 @@ import time
 import warnings
 
 import numpy as np
+from mpi4py import MPI
 
 from .boundaries import TractionForms
 from .boundaries import particle_layer as kl
@@ -24,6 +25,7 @@ from .setup import SetupMixin
 from .shapes import resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
+MANY_STEPS = 1_000_000         # dt="auto" runs longer than this many steps are warned about
 
 
 class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
@@ -157,7 +159,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                 raise ValueError(f"Simulation: 'dt' must be a positive number or 'auto', got {dt!r}")
             if not self.integrator.explicit:
                 raise ValueError("Simulation: dt='auto' is only defined for explicit integrators")
+            self._dt_auto = True
             return self.cfl * self.dt_critical
+        self._dt_auto = False
         if not isinstance(dt, (int, float, np.floating)) or not math.isfinite(dt) or dt <= 0:
             raise ValueError(f"Simulation: 'dt' must be > 0, got {dt!r}")
         if self.integrator.explicit and dt > self.dt_critical * (1.0 + 1e-12):   # round-off in h
@@ -243,11 +247,13 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         return m, mv
 
     def nodal_mass(self):
+        """Local nodal mass (not yet summed over ranks)."""
         m = np.zeros(self.grid.n_nodes)
         kt.p2g_mass(self.nodes, self.N, self.particles.mass, m)
         return m
 
     def nodal_weighted(self, q):
+        """Local nodal sums sum_p N_ip m_p q_p of a per-particle quantity q (not yet summed over ranks)."""
         out = np.zeros((self.grid.n_nodes, self.gdim))
         kt.p2g_weighted(self.grid.D, self.nodes, self.N, self.particles.mass, q, out)
         return out
@@ -422,6 +428,31 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             if self.step_count % every == 0:
                 callback(self)
 
+    def _check_run(self, steps):
+        """Before a run: warn when dt="auto" gives more than MANY_STEPS steps (naming the
+        material that limits dt), and refuse an explicit run whose particles would cross more
+        than a cell in one step (max |v| dt > h)."""
+        mats = self.particles.materials
+        if getattr(self, "_dt_auto", False) and steps > MANY_STEPS and self.comm.rank == 0:
+            m = max(mats, key=lambda q: q.p_wave_speed)
+            warnings.warn(f"run: dt='auto' gives {steps:,} steps of dt = {self.dt:.3g} s; the "
+                          f"limit cfl * h / c_p comes from {type(m).__name__} (material "
+                          f"{mats.index(m)}, c_p = {m.p_wave_speed:.4g} m/s, h = "
+                          f"{self.grid.h:.4g}); check the units, or use an implicit integrator",
+                          RuntimeWarning, stacklevel=3)
+        if not self.integrator.explicit:
+            return
+        v = self.particles.v
+        vmax = float(np.sqrt(np.max(np.einsum("pi,pi->p", v, v)))) if len(v) else 0.0
+        if self.comm.size > 1:
+            vmax = self.comm.allreduce(vmax, op=MPI.MAX)
+        if vmax * self.dt > self.grid.h:
+            what = "initial particle velocity" if self.step_count == 0 else "particle velocity"
+            raise ValueError(f"run: the {what} |v| = {vmax:.4g} m/s exceeds the explicit "
+                             f"stability limit h / dt = {self.grid.h / self.dt:.4g} m/s "
+                             f"(h = {self.grid.h:.4g}, dt = {self.dt:.4g}): a particle would "
+                             f"cross more than a cell per step; reduce dt or the velocity")
+
     def run(self, t_end=None, steps=None, output=None, progress=None, checkpoint=None,
             checkpoint_every=None):
         """Run until t_end or for a number of steps; write `output` (an Output) as configured.
@@ -435,16 +466,18 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         if (t_end is None) == (steps is None):
             raise ValueError("run: give exactly one of 't_end' or 'steps'")
         if steps is None:
-            if not (isinstance(t_end, (int, float)) and t_end > self.t):
+            if isinstance(t_end, bool) or not (isinstance(t_end, (int, float, np.floating))
+                                               and math.isfinite(t_end) and t_end > self.t):
                 raise ValueError(f"run: 't_end' must be > current time {self.t}, got {t_end!r}")
             steps = int(math.ceil((t_end - self.t) / self.dt - 1e-9))
-        elif not (isinstance(steps, (int, np.integer)) and steps >= 0):
+        elif isinstance(steps, bool) or not (isinstance(steps, (int, np.integer)) and steps >= 0):
             raise ValueError(f"run: 'steps' must be a non-negative integer, got {steps!r}")
         if (checkpoint is None) != (checkpoint_every is None):
             raise ValueError("run: give both 'checkpoint' (a directory) and 'checkpoint_every'")
         if checkpoint_every is not None and not (
                 isinstance(checkpoint_every, (int, np.integer)) and checkpoint_every >= 1):
             raise ValueError(f"run: 'checkpoint_every' must be a positive integer, got {checkpoint_every!r}")
+        self._check_run(steps)
         t_final = self.t + steps * self.dt
         self.stats["courant"] = self.courant
         note = "" if self.integrator.explicit else f"Courant {self.courant:.3g}"

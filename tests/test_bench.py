@@ -83,7 +83,7 @@ def test_particle_count_is_global(tiny):
     r = doc["runs"][0]
     sim = throughput.build_scene(dict(r["config"]), comm)
     n_local = len(sim.particles)
-    assert comm.allreduce(n_local) == r["n_particles"] == sim.particles.n_global
+    assert comm.allreduce(n_local) == r["n_particles"] == sim.particles.n_global()
 
 
 def test_png(tiny):

@@ -154,7 +154,7 @@ def test_restart_on_another_rank_count(shared_tmp_path):
         build(MPI.COMM_SELF).run(steps=20, checkpoint=path, checkpoint_every=20)
     WORLD.barrier()
     again = fm.Simulation.restart(path, lambda: build(WORLD))
-    assert again.particles.n_global == len(ref.particles)
+    assert again.particles.n_global() == len(ref.particles)
     again.run(steps=20)
     p, r = again.particles, ref.particles
     ids = np.concatenate(WORLD.allgather(p.id))           # ids travel with the checkpoint

@@ -65,8 +65,8 @@ def test_uniform_translation(comm, ct, scheme):
     v_err = _gmax(comm, p.v - v0) / np.linalg.norm(v0)
     u_err = _gmax(comm, p.u - v0 * t) / (np.linalg.norm(v0) * t)
     moved = _gmin(comm, np.abs(p.u[:, 0]))
-    n = p.n_global
-    assert n == pts.n_global and n > 0
+    n = p.n_global()
+    assert n == pts.n_global() and n > 0
     assert moved > 2 * grid.h, f"particles moved only {moved:.3g} < 2 h = {2 * grid.h:.3g}: no cell crossing"
     # USL takes L from v + dt f/m: at nearly empty nodes (m ~ 1e-5 m_max) the round-off stress
     # is divided by a tiny mass and grows from step to step, the known small-mass weakness of

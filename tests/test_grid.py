@@ -100,6 +100,6 @@ def test_fill_volume_and_mass(comm, distort, ct, per_cell, distorted):
     assert vol_err < 1e-12, f"sum V_p = {volume!r}, mesh volume 1.5 (rel err {vol_err:.2e}, tol 1e-12)"
     assert abs(mass - RHO * 1.5) < 1e-12 * RHO * 1.5, f"total mass {mass!r} != rho |Omega| = {RHO * 1.5}"
     assert mass_err < 1e-14, f"max |m_p - rho V_p| / (rho V_p) = {mass_err:.2e} (tol 1e-14)"
-    assert p.n_global == n_cells * per_cell ** d, (
-        f"{p.n_global} particles, expected {n_cells} cells x {per_cell}^{d}")
+    assert p.n_global() == n_cells * per_cell ** d, (
+        f"{p.n_global()} particles, expected {n_cells} cells x {per_cell}^{d}")
     assert np.all(p.V > 0) and misplaced == 0, f"{misplaced} particles not located in their cell"

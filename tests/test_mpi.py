@@ -29,12 +29,12 @@ def test_translating_block_migrates(cell_type, structured):
     v = np.array([1.0, 0.8])
     p = fm.Particles.fill(grid, mat, per_cell=2, region=lambda x: (x[:, 0] < 0.3) & (x[:, 1] < 0.3),
                           velocity=v)
-    n0, ids0 = p.n_global, np.sort(np.concatenate(comm.allgather(p.id)))
+    n0, ids0 = p.n_global(), np.sort(np.concatenate(comm.allgather(p.id)))
     m0 = p.total(p.mass)
     sim = fm.Simulation(grid, p, fm.Explicit("MUSL"), dt=0.005)
     sim.run(steps=100)                       # moves 0.5 in x, 0.4 in y
     ids = np.sort(np.concatenate(comm.allgather(p.id)))
-    assert p.n_global == n0 and np.array_equal(ids, ids0), "particles lost or duplicated"
+    assert p.n_global() == n0 and np.array_equal(ids, ids0), "particles lost or duplicated"
     owned = comm.allreduce(int(np.all((p.cell >= 0) & (p.cell < grid.n_owned_cells))), op=MPI.MIN)
     assert owned == 1, "a particle sits on a rank that does not own its cell"
     assert np.allclose(p.momentum() / m0, v, rtol=1e-12, atol=0)
@@ -51,7 +51,7 @@ def test_leaving_the_domain_is_reported_on_all_ranks():
     grid = fm.Grid(msh)
     mat = fm.LinearElastic(E=10.0, nu=0.3, density=1.0)
     p = fm.Particles.fill(grid, mat, per_cell=2, region=lambda x: x[:, 0] > 0.8, velocity=(1.0, 0.0))
-    n_edge = p.n_global
+    n_edge = p.n_global()
     sim = fm.Simulation(grid, p, fm.Explicit("MUSL"), dt=0.005)
     with pytest.raises(RuntimeError, match=r"particle\(s\) left the mesh"):
         sim.run(steps=100)
@@ -69,7 +69,7 @@ def test_from_points_is_distributed():
     rng = np.random.default_rng(0)
     pts = rng.random((200, 2)) if comm.rank == 0 else np.zeros((0, 2))
     p = fm.Particles.from_points(grid, mat, pts, 1e-3)
-    assert p.n_global == 200
+    assert p.n_global() == 200
     assert np.all(p.cell < grid.n_owned_cells) and np.all(p.cell >= 0)
     allx = np.concatenate(comm.allgather(p.x))
     ref = rng.__class__(np.random.PCG64(0)).random((200, 2))

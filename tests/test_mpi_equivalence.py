@@ -85,7 +85,7 @@ def test_particle_crossing_back_and_forth_is_owned_at_every_step():
                           region=lambda x: np.all((x > 0.05) & (x < 0.3), axis=1),
                           velocity=(3.0 / np.sqrt(2), 3.0 / np.sqrt(2)))
     m0 = p.total(p.mass)
-    n = p.n_global
+    n = p.n_global()
     g = 10.0 / np.sqrt(2)
     sim = fm.Simulation(grid, p, fm.Explicit("MUSL"), dt=0.005, gravity=(-g, -g))
 

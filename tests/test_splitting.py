@@ -32,11 +32,11 @@ def test_children_carry_the_affine_velocity_and_conserve_mass_and_momentum():
     sim.locate_and_shape()
     sim.nodal = dict(velocity=grid.node_x @ A.T + B)          # the affine grid field
     p.voxel[::3, 0, 0] *= 2.5                                  # every third voxel stretched in x
-    m0, mom0, n0 = p.total(p.mass), p.momentum(), p.n_global
+    m0, mom0, n0 = p.total(p.mass), p.momentum(), p.n_global()
     expected = WORLD.allreduce(len(range(0, len(p), 3)))
     n_split = split.apply(sim)
     assert n_split == expected > 0
-    assert p.n_global == n0 + n_split and split.count == n_split
+    assert p.n_global() == n0 + n_split and split.count == n_split
     assert np.isclose(p.total(p.mass), m0, rtol=1e-15, atol=0)
     assert np.allclose(p.momentum(), mom0, rtol=1e-14, atol=0)
     assert np.allclose(p.v, p.x @ A.T + B, rtol=0, atol=1e-13), "children off the affine field"
@@ -54,13 +54,13 @@ def test_free_extension_splits_and_rotation_does_not():
     along y."""
     rate = 1.0
     grid, p = _setup(n=16, velocity=lambda x: np.c_[rate * (x[:, 0] - 2.0), np.zeros(len(x))])
-    n0, m0 = p.n_global, p.total(p.mass)
+    n0, m0 = p.n_global(), p.total(p.mass)
     sim = fm.Simulation(grid, p, fm.Explicit("USL"), dt=2e-3)
     split = sim.enable_splitting()
     sim.run(t_end=1.5)
     assert split.count >= 0.75 * n0, (split.count, n0)
     q = sim.particles
-    assert q.n_global == n0 + split.count
+    assert q.n_global() == n0 + split.count
     side = 0.125                                               # 2 particles per 0.25 m cell
     assert np.allclose(q.voxel[:, 1, 1], side) and np.allclose(q.voxel[:, 0, 1], 0.0)
     reset = WORLD.allreduce(int(np.count_nonzero(~np.isclose(q.voxel_ref[:, 0, 0], side))))

@@ -41,6 +41,7 @@ def _discover():
 
 
 def case_names():
+    """The names of the registered benchmark cases, sorted."""
     return sorted(CASES)
 
 

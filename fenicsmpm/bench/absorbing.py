@@ -277,7 +277,7 @@ def run_scene(spec, quick, comm):
         cfg.update(beta=0.25, gamma=0.5)
         integ.system.destroy()
     n_cells = sim.grid.comm.allreduce(sim.grid.n_owned_cells)
-    return common.make_record(spec["name"], cfg, sim.particles.n_global, n_cells, steps, wall, m)
+    return common.make_record(spec["name"], cfg, sim.particles.n_global(), n_cells, steps, wall, m)
 
 
 STYLE = {"fixed": "0.4", "viscous": "C0", "viscoelastic": "C1"}

@@ -170,7 +170,7 @@ def _run_v1(series, n_cells, comm, periods, v0):
                dt_rule=f"cfl {CFL:g} * h / c" if integ.explicit
                else f"{NEWMARK_DT_FACTOR:g} * h / c")
     rec = common.make_record(f"V1 {series} v0={v0:g} n={n_cells}", cfg,
-                             sim.particles.n_global, common.global_cells(sim), steps, wall, m)
+                             sim.particles.n_global(), common.global_cells(sim), steps, wall, m)
     rec.update(problem="V1", series=f"{series} v0={v0:g}")
     if not integ.explicit:
         integ.system.destroy()
@@ -205,7 +205,7 @@ def _run_v2(n_cells, comm):
                scheme="QuasiStatic", shape="Q1 (standard MPM)", h=exact["h"], dt=sim.dt,
                ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
                load_steps=LOAD_STEPS, **V2)
-    rec = common.make_record(f"V2 QuasiStatic n={n_cells}", cfg, p.n_global, common.global_cells(sim),
+    rec = common.make_record(f"V2 QuasiStatic n={n_cells}", cfg, p.n_global(), common.global_cells(sim),
                              LOAD_STEPS, wall, m)
     rec.update(problem="V2", series="QuasiStatic")
     integ.system.destroy()

@@ -47,7 +47,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
                 cfg = dict(integrator="QuasiStatic", scheme="Newton", shape=shape, h=h, dt=1.0,
                            ppc=4, cell_type="quadrilateral", problem=kind, nx=nx)
                 runs.append(common.make_record(f"{kind}-{shape}-nx{nx}", cfg,
-                                               sim.particles.n_global, nx * max(1, nx // 4),
+                                               sim.particles.n_global(), nx * max(1, nx // 4),
                                                sim.step_count, wall, m))
                 say(f"{kind} {shape} nx = {nx}: error {m['error']:.3e}, wall {wall:.3f} s")
     doc = common.result(CASE, runs, comm, quick=quick,

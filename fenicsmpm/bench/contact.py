@@ -114,7 +114,7 @@ def incline(theta_deg, mu, algorithm="multi-velocity", h=0.4, ppc=2, t_end=1.0, 
     x_ex = float(exact_x(theta_deg, mu, sim.t))
     return dict(t=np.array(ts), x=np.array(xs), x_end=x_end, x_exact=x_ex,
                 error=(x_end - x_ex) / x_ex, wall_s=wall, steps=steps, sim=sim,
-                n_particles=p.n_global, n_cells=round(L / h) * round(H / h))
+                n_particles=p.n_global(), n_cells=round(L / h) * round(H / h))
 
 
 SIZES = {"quick": dict(cells=(0.4,), t_end=1.0), "full": dict(cells=(0.4, 0.2, 0.1), t_end=1.0)}

@@ -135,7 +135,7 @@ def run_one(kind, scheme, shape, n_cells, comm):
     setup = common.gmax(comm, time.perf_counter() - t0)
     wall, _ = common.timed_run(sim, ex.steps)
     err = errors(sim, ex)
-    n = sim.particles.n_global
+    n = sim.particles.n_global()
     m = dict(displacement_error=err["displacement"], stress_error=err["stress"], setup_s=setup,
              wall_per_particle_step_s=wall / (n * ex.steps))
     if not integ.explicit:

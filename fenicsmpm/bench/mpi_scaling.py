@@ -208,7 +208,7 @@ def _measure(spec, comm):
         ksp = sim.integrator.system.ksp
         cfg.update(ksp_type=ksp.getType(), pc_type=ksp.getPC().getType(),
                    factor_solver=ksp.getPC().getFactorSolverType())
-    n_part = p.n_global
+    n_part = p.n_global()
 
     def imbalance():
         counts = np.array(comm.allgather(len(p)), dtype=float)

@@ -172,7 +172,7 @@ def run_scene(scene, kind, size, comm, t_end=None):
                   cell_type="quadrilateral", scene=scene, t_end=t_end,
                   base=("frictional mu=0.6" if explicit else "fixed (no slip)")
                   if scene == "collapse" else "rollers")
-    rec = common.make_record(f"{scene}-{kind}", config, p.n_global,
+    rec = common.make_record(f"{scene}-{kind}", config, p.n_global(),
                              grid.mesh.topology.index_map(2).size_global, steps, wall, metrics)
     return rec, error
 

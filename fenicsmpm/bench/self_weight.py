@@ -76,7 +76,7 @@ def run_one(problem, kind, shape, n_cells, comm):
     setup = common.gmax(comm, time.perf_counter() - t0)
     wall, _ = common.timed_run(sim, ex.steps)
     err = errors(sim, ex)
-    n = sim.particles.n_global
+    n = sim.particles.n_global()
     p = sim.particles
     settle = -common.gmin(comm, float(p.u[:, 1].min()) if len(p) else 0.0)
     m = dict(stress_error=err["stress"], setup_s=setup, top_settlement=settle,

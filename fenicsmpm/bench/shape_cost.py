@@ -48,7 +48,7 @@ def run_one(shape, n, steps, warmup, comm):
     sim = _scene(shape, n, comm)
     setup = time.perf_counter() - t0
     t = common.time_steps(sim, steps, warmup=warmup)
-    npart = sim.particles.n_global
+    npart = sim.particles.n_global()
     width = sim.nodes.shape[1]
     return sim, t, npart, setup, width
 

@@ -60,7 +60,7 @@ def run_one(name, cls, make, extra, h, t_end, comm):
     config = dict(integrator=cls, scheme=getattr(sim.integrator, "scheme", None), shape="mpm",
                   h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral",
                   t_end=t_end, base="rigid", gravity="sudden", **extra)
-    rec = common.make_record(f"{name}-h{h:g}", config, sim.particles.n_global,
+    rec = common.make_record(f"{name}-h{h:g}", config, sim.particles.n_global(),
                              sim.grid.global_count(np.ones(sim.grid.n_owned_cells, bool)),
                              sim.step_count, wall, metrics)
     sel = f <= 8.0

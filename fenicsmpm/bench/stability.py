@@ -187,7 +187,7 @@ def _bar_record(name, r, **extra):
     sim = r["sim"]
     cfg = _config(sim, problem="V1 vibrating bar", cells_along=round(1.0 / r["exact"]["h"]),
                   courant=sim.dt * r["exact"]["wave_speed"] / r["exact"]["h"], **extra)
-    rec = common.make_record(name, cfg, sim.particles.n_global, common.global_cells(sim),
+    rec = common.make_record(name, cfg, sim.particles.n_global(), common.global_cells(sim),
                              max(r["steps"], 1), max(r["wall_s"], 1e-9), r["metrics"])
     rec["outcome"] = r["outcome"]
     return rec
@@ -524,7 +524,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, **sizes):
         r = collapse(S["collapse_rows"], load, comm=comm)
         cfg = _config(r["sim"], problem="neo-Hookean block collapse", rows=S["collapse_rows"],
                       **{k: v for k, v in COLLAPSE.items()})
-        rec = common.make_record(name, cfg, r["sim"].particles.n_global,
+        rec = common.make_record(name, cfg, r["sim"].particles.n_global(),
                                  common.global_cells(r["sim"]), max(r["steps"], 1),
                                  max(r["wall_s"], 1e-9), r["metrics"])
         rec["outcome"] = r["outcome"]
@@ -545,7 +545,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, **sizes):
         cfg = _config(r["sim"], problem="L2 colliding discs", speed_factor=IMPACT_SPEED_FACTOR,
                       material=type(mat).__name__ if mat is not None else "LinearElastic",
                       t_end=IMPACT_T_END, cells_per_side=S["impact_cells"])
-        rec = common.make_record(name, cfg, r["sim"].particles.n_global,
+        rec = common.make_record(name, cfg, r["sim"].particles.n_global(),
                                  common.global_cells(r["sim"]), max(r["steps"], 1),
                                  max(r["wall_s"], 1e-9), r["metrics"])
         rec["outcome"] = r["outcome"]

@@ -3,9 +3,10 @@
 
     python -m fenicsmpm.bench techniques [--quick] [--out DIR]
     python -m fenicsmpm.bench.techniques [--quick] [--out DIR]      (the same run)
-    python -m fenicsmpm.bench.techniques --readme [--out DIR] [--readme-path README.md]
+    python -m fenicsmpm.bench.techniques --readme [--out DIR] [--readme-path FILE]
         (no run: rewrites the block between <!-- techniques-table:start --> and
-         <!-- techniques-table:end --> of README.md from DIR/techniques.json)
+         <!-- techniques-table:end --> of FILE, by default docs/guide/choosing.md, the docs
+         page "Choosing a method", from DIR/techniques.json)
 
 Configurations (one technique changed at a time against the baseline "MUSL mpm"; family in
 brackets):
@@ -241,7 +242,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
     except Exception as exc:                 # recorded, not raised: a failing technique is data
         failure = f"{type(exc).__name__}: {exc}"
     wall = common.gmax(comm, wall)
-    n = sim.particles.n_global
+    n = sim.particles.n_global()
     if failure is None:
         if problem == "V2":
             err = v2_current_stress_error(sim, ex)
@@ -337,6 +338,11 @@ def _fmt(x, digits=3):
     return common.format_number(x, digits)
 
 
+def _md(text):
+    """Text for a markdown table cell (a '|' would end the cell)."""
+    return text.replace("|", "\\|")
+
+
 def _option_label(o):
     return {BASELINE: "MUSL mpm (baseline)"}.get(o, o)
 
@@ -361,7 +367,7 @@ def readme_block(doc, top=3):
             r = by[(prob, name)]
             xt = _xt(r)
             lines.append(
-                f"| {prob if k == 0 else ''} | {ERROR_NAMES[prob] if k == 0 else ''} | {k + 1} | "
+                f"| {prob if k == 0 else ''} | {_md(ERROR_NAMES[prob]) if k == 0 else ''} | {k + 1} | "
                 f"{_option_label(name)} | {_fmt(r['metrics'].get('error'))} | "
                 f"{_fmt(r['wall_s'])} | {_fmt(xt)} | "
                 f"{_fmt(xt / base) if (xt is not None and base) else '-'} |")
@@ -547,8 +553,9 @@ def load(out):
 
 
 def default_readme():
+    """The page holding the techniques block: docs/guide/choosing.md of the repository."""
     return os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))),
-                        "README.md")
+                        "docs", "guide", "choosing.md")
 
 
 def main(argv=None):
@@ -559,7 +566,7 @@ def main(argv=None):
     ap.add_argument("--readme", action="store_true",
                     help="do not run: rewrite the README block from DIR/techniques.json")
     ap.add_argument("--readme-path", default=None, metavar="FILE",
-                    help="README to rewrite (default: the repository's README.md)")
+                    help="page to rewrite (default: the repository's docs/guide/choosing.md)")
     args = ap.parse_args(argv)
     if args.readme:
         path = update_readme(load(args.out), args.readme_path or default_readme())

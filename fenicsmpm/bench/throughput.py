@@ -140,7 +140,7 @@ def run_scene(spec, comm=None):
     cfg = scene_config(spec)
     mem = common.MemoryProbe(comm).start()
     sim = build_scene(cfg, comm)
-    n_part = sim.particles.n_global
+    n_part = sim.particles.n_global()
     implicit = not sim.integrator.explicit
     if implicit:
         ksp = sim.integrator.system.ksp

@@ -77,10 +77,16 @@ class InputMotion:
             raise ValueError(f"InputMotion: 'kind' must be one of {KINDS}, got {kind!r}")
         t = np.asarray(t, dtype=float)
         y = scale * np.asarray(values, dtype=float)
-        if t.ndim != 1 or t.shape != y.shape or len(t) < 3:
-            raise ValueError("InputMotion: need 1D time and value arrays of equal length >= 3")
-        if not (np.all(np.isfinite(t)) and np.all(np.isfinite(y)) and np.all(np.diff(t) > 0)):
-            raise ValueError("InputMotion: times must increase and all values be finite")
+        if t.ndim != 1 or len(t) < 3:
+            raise ValueError(f"InputMotion: 't' must be a 1D array of at least 3 times, got "
+                             f"shape {t.shape}")
+        if y.shape != t.shape:
+            raise ValueError(f"InputMotion: 'values' must have one value per time in 't', "
+                             f"shape {t.shape}, got shape {y.shape}")
+        if not (np.all(np.isfinite(t)) and np.all(np.diff(t) > 0)):
+            raise ValueError("InputMotion: 't' must increase strictly and be finite")
+        if not np.all(np.isfinite(y)):
+            raise ValueError("InputMotion: 'values' (times 'scale') must be finite")
         a = np.gradient(y, t) if kind == "velocity" else y
         self.t = t
         self.a, self.v, self.u = baseline_correct(t, a, int(baseline or 0))
@@ -88,6 +94,7 @@ class InputMotion:
 
     @classmethod
     def from_file(cls, path, kind="acceleration", baseline=1, scale=1.0):
+        """A motion from a two-column text file (time, value); see the class docstring."""
         txt = open(path).read().replace(",", " ")
         data = np.loadtxt(txt.splitlines(), comments="#")
         if data.ndim != 2 or data.shape[1] != 2:
@@ -96,6 +103,7 @@ class InputMotion:
 
     @classmethod
     def from_callable(cls, f, t_end, dt, kind="acceleration", baseline=1, scale=1.0):
+        """A motion sampled from f(t) on [0, t_end] every dt; see the class docstring."""
         if not callable(f):
             raise TypeError("InputMotion.from_callable: 'f' must be callable f(t) -> value")
         t = np.arange(int(math.floor(t_end / dt + 1e-9)) + 1) * dt
@@ -105,12 +113,15 @@ class InputMotion:
         return np.interp(s, self.t, y, left=0.0, right=0.0)
 
     def acceleration(self, s):
+        """Base acceleration at time s (0 outside the record)."""
         return self._at(self.a, s)
 
     def velocity(self, s):
+        """Base velocity at time s (0 outside the record)."""
         return self._at(self.v, s)
 
     def displacement(self, s):
+        """Base displacement at time s (0 before the record, held after it)."""
         return np.interp(s, self.t, self.u, left=0.0)
 
 
@@ -137,6 +148,9 @@ def rigid_base(sim, where, motion, component=0):
     RigidBase (sim.base_motion)."""
     if not isinstance(motion, InputMotion):
         raise TypeError("rigid_base: 'motion' must be an fm.InputMotion")
+    if not (isinstance(component, (int, np.integer)) and 0 <= component < sim.gdim):
+        raise ValueError(f"rigid_base: 'component' must be "
+                         f"{' or '.join(map(str, range(sim.gdim)))}, got {component!r}")
     sim.fix(where)
     sim.base_motion = RigidBase(motion, component)
     return sim.base_motion

@@ -14,19 +14,44 @@ from ..kernels.axisymmetric import radius_weight
 class Traction:
     """Traction vector value on the boundary facets selected by where(x).
 
-    value is a constant vector or a callable t -> vector (time-dependent amplitude)."""
+    value is a constant vector or a callable t -> vector (time-dependent amplitude); `name`
+    (e.g. "add_traction #0") is how errors refer to it."""
 
-    def __init__(self, where, value):
+    def __init__(self, where, value, name="traction"):
         if not callable(where):
-            raise TypeError("Traction: 'where' must be callable where(x) -> bool")
+            raise TypeError(f"{name}: 'where' must be callable where(x) -> bool, got "
+                            f"{type(where).__name__}")
+        if not callable(value) and not _is_vector(value):
+            raise TypeError(f"{name}: 'value' must be a vector or a function t -> vector, got "
+                            f"{value!r}")
         self.where = where
         self.value = value
+        self.name = name
 
-    def at(self, t, gdim):
-        val = np.asarray(self.value(t) if callable(self.value) else self.value, dtype=np.float64)
+    def at(self, t, gdim, nonfinite=FloatingPointError):
+        """The traction vector at time t. A ValueError naming the traction if value(t) is not
+        a vector of length gdim; `nonfinite` (FloatingPointError during a run, ValueError when
+        the traction is added) if it is not finite."""
+        raw = self.value(t) if callable(self.value) else self.value
+        if not _is_vector(raw):
+            raise ValueError(f"{self.name}: 'value' must give a vector of length {gdim}, got "
+                             f"{raw!r} at t = {t:.6g}")
+        val = np.asarray(raw, dtype=np.float64)
         if val.shape != (gdim,):
-            raise ValueError(f"Traction: value must be a vector of length {gdim}, got shape {val.shape}")
+            raise ValueError(f"{self.name}: 'value' must give a vector of length {gdim}, got "
+                             f"shape {val.shape} at t = {t:.6g}")
+        if not np.all(np.isfinite(val)):
+            raise nonfinite(f"{self.name}: 'value' gave the non-finite traction "
+                                     f"{val.tolist()} at t = {t:.6g}")
         return val
+
+
+def _is_vector(value):
+    """Whether value converts to a 1-D float array."""
+    try:
+        return np.asarray(value, dtype=np.float64).ndim == 1
+    except (TypeError, ValueError):
+        return False
 
 
 class TractionForms:
@@ -41,7 +66,7 @@ class TractionForms:
             f = dmesh.locate_entities_boundary(msh, fdim, lambda x, w=tr.where: w(x.T[:, :gdim]))
             n = grid.comm.allreduce(len(f)) if grid.comm.size > 1 else len(f)
             if n == 0:
-                raise ValueError(f"add_traction: locator #{k} matches no boundary facet")
+                raise ValueError(f"{tr.name}: the locator 'where' matches no boundary facet")
             facets.append(f)
             tags.append(np.full(len(f), k + 1, dtype=np.int32))
         facets = np.concatenate(facets)

@@ -116,9 +116,21 @@ def set_body(particles, body_id, region=None):
     b = particles.add_field("body", (), np.int32)
     if fresh:
         b[:] = particles.material_id
-    sel = slice(None) if region is None else np.asarray(region(particles.x), dtype=bool)
+    sel = slice(None) if region is None else np.asarray(region(particles.x))
+    if region is not None and sel.shape != (len(particles),):
+        raise ValueError(f"set_body: 'region(x)' must return one bool per particle, shape "
+                         f"({len(particles)},), got shape {sel.shape}")
+    sel = sel if region is None else sel.astype(bool)
     b[sel] = body_id
     return b
+
+
+def _finite_vector(value):
+    try:
+        a = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False
+    return a.ndim == 1 and bool(np.all(np.isfinite(a)))
 
 
 def body_ids(particles):
@@ -487,11 +499,19 @@ class ExplicitContact:
         vals = list(pairs.values()) + ([] if isinstance(mu, dict) else [mu]) + [mu_default]
         for v in vals:
             if not (isinstance(v, (int, float, np.floating)) and np.isfinite(v) and v >= 0):
-                raise ValueError(f"ExplicitContact: friction coefficients must be finite numbers "
-                                 f">= 0, got {v!r}")
+                raise ValueError(f"ExplicitContact: 'mu' (friction coefficients, and "
+                                 f"'mu_default') must be finite numbers >= 0, got {v!r}")
         self.scheme, self.flip, self.algorithm = scheme, float(flip), algorithm
         self.mu_pairs = {tuple(sorted(k)): float(v) for k, v in pairs.items()}
         self.mu_all = float(mu_default if isinstance(mu, dict) else mu)
+        if rigid is not None and not isinstance(rigid, dict):
+            raise TypeError(f"ExplicitContact: 'rigid' must be a dict {{body: velocity}}, got "
+                            f"{type(rigid).__name__}")
+        for b, law in (rigid or {}).items():
+            if not (isinstance(b, (int, np.integer)) and b >= 0) or not (
+                    callable(law) or _finite_vector(law)):
+                raise ValueError(f"ExplicitContact: 'rigid' maps body ids >= 0 to a velocity "
+                                 f"vector, t -> vector or fm.RigidLoad, got {b!r}: {law!r}")
         self.rigid = dict(rigid or {})
         if gap is not None and not (isinstance(gap, (int, float, np.floating)) and np.isfinite(gap)):
             raise ValueError(f"ExplicitContact: 'gap' must be None or a finite number, got {gap!r}")
@@ -542,6 +562,7 @@ class ExplicitContact:
         self._penalty = None
 
     def setup(self, sim):
+        """Check the scene before the first step (integrator protocol: called once)."""
         if sim.layers:
             raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
         if sim.force_integration != "particles":
@@ -709,11 +730,13 @@ class ExplicitContact:
 
     # ------------------------------------------------------------------ step
     def step(self, sim, dt):
+        """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         if sim.layers:
             raise NotImplementedError("ExplicitContact: particle-layer boundaries are not supported")
         p, grid, T = sim.particles, sim.grid, sim.timers
         D, d = grid.D, sim.gdim
         sim.locate_and_shape()
+        p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
         body = self._bodies(sim)                     # after migration
         self._friction_gaps(sim, body)
         nb, nn = self.nb, grid.n_nodes
@@ -813,3 +836,5 @@ class ExplicitContact:
         if sim.robin is not None:
             sim.robin_u += dt * vcm
         sim.nodal = dict(mass=m, velocity=vcm, active=active, body_mass=m_b, body_velocity=v1)
+        np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
+        p.a /= dt

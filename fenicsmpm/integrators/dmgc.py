@@ -135,6 +135,7 @@ class _DoubleMapping:
     the double-mapped Gauss-point stiffness."""
 
     def setup(self, sim):
+        """Check the grid and shape, build the Gauss-point and CMPM data (integrator protocol)."""
         name = type(self).__name__
         if sim.gdim != 2 or getattr(sim, "shape", "mpm") not in ("ugimp", "cpgimp"):
             raise ValueError(f"{name}: needs a 2D structured quadrilateral grid (dolfinx "
@@ -164,6 +165,7 @@ class _DoubleMapping:
         self._omp = None
 
     def solve_step(self, sim, *args, **kw):
+        """Newton's solve of the step (implicit.py) after the step's DM-GC data is prepared."""
         self.prepare(sim)
         return super().solve_step(sim, *args, **kw)
 

@@ -30,6 +30,10 @@ TRANSFERS = ("apic", "flip")
 
 
 class Explicit:
+    """Explicit symplectic-Euler MPM with the update order `scheme` ("USF", "USL", "MUSL",
+    "AVG"; module docstring) and the FLIP/PIC blend `flip` (1: FLIP, 0: PIC) for particle
+    velocities. Needs dt below the critical step (dt="auto" gives cfl * h / c_p). Fills the
+    particle acceleration a = (v_new - v_old) / dt."""
     explicit = True
     records_work = True
     supports_friction = True
@@ -97,8 +101,10 @@ class Explicit:
         sim.commit(dF)
 
     def step(self, sim, dt):
+        """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
+        p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
         t0 = time.perf_counter()
         self._gaps = [b.gaps(sim) for b in sim.frictions]
         m, mv = self._p2g(sim, p.v, p.x, True)
@@ -152,3 +158,5 @@ class Explicit:
         if sim.robin is not None:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active)
+        np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
+        p.a /= dt

@@ -177,9 +177,11 @@ class ExplicitGeneralizedAlpha:
         self.stability_factor = 0.5 * self.params.omega_s
 
     def setup(self, sim):
+        """Nothing to prepare (integrator protocol: Simulation calls setup(sim) once)."""
         pass
 
     def step(self, sim, dt):
+        """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T, prm = sim.particles, sim.grid, sim.timers, self.params
         shift = prm.gamma - 0.5
         sim.locate_and_shape()

@@ -35,10 +35,15 @@ class _Newton:
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
                  prefix=DEFAULT_PREFIX):
         for name, val in (("rtol", rtol), ("utol", utol)):
-            if not (isinstance(val, (int, float)) and val > 0):
+            if isinstance(val, bool) or not (isinstance(val, (int, float)) and val > 0):
                 raise ValueError(f"{type(self).__name__}: '{name}' must be > 0, got {val!r}")
-        if not (isinstance(max_iter, int) and max_iter >= 1):
+        if isinstance(flip, bool) or not (isinstance(flip, (int, float)) and 0.0 <= flip <= 1.0):
+            raise ValueError(f"{type(self).__name__}: 'flip' must be in [0, 1], got {flip!r}")
+        if isinstance(max_iter, bool) or not (isinstance(max_iter, int) and max_iter >= 1):
             raise ValueError(f"{type(self).__name__}: 'max_iter' must be a positive integer, got {max_iter!r}")
+        if petsc_options is not None and not isinstance(petsc_options, dict):
+            raise TypeError(f"{type(self).__name__}: 'petsc_options' must be a dict of PETSc "
+                            f"options or None, got {type(petsc_options).__name__}")
         self.rtol, self.utol, self.max_iter, self.flip = rtol, utol, max_iter, float(flip)
         self.petsc_options, self.prefix = petsc_options, prefix
         self.system = None
@@ -46,6 +51,7 @@ class _Newton:
         self.ksp_iterations = 0
 
     def setup(self, sim):
+        """Build the PETSc linear system on the grid (integrator protocol: called once)."""
         shape = getattr(sim, "shape", "mpm")        # wide shapes: a pattern over cell rings
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape)
@@ -189,11 +195,18 @@ class Newmark(_Newton):
 
     def __init__(self, beta=0.25, gamma=0.5, **kw):
         super().__init__(**kw)
-        if not (0 < beta <= 0.5 and 0 <= gamma <= 1):
-            raise ValueError(f"Newmark: need 0 < beta <= 1/2 and 0 <= gamma <= 1, got beta={beta}, gamma={gamma}")
+        for name, val in (("beta", beta), ("gamma", gamma)):
+            if isinstance(val, bool) or not isinstance(val, (int, float, np.floating)):
+                raise TypeError(f"Newmark: '{name}' must be a number, got {val!r}")
+        if not 0.5 <= gamma <= 1:
+            raise ValueError(f"Newmark: 'gamma' must be in [1/2, 1] (gamma < 1/2 amplifies every "
+                             f"mode: unstable), got {gamma}")
+        if not 0 < beta <= 0.5:
+            raise ValueError(f"Newmark: 'beta' must be in (0, 1/2], got {beta}")
         self.beta, self.gamma = float(beta), float(gamma)
 
     def step(self, sim, dt):
+        """Advance `sim` by dt with Newton (integrator protocol: called by Simulation.step)."""
         p, grid = sim.particles, sim.grid
         b, g = self.beta, self.gamma
         sim.locate_and_shape()
@@ -278,6 +291,7 @@ class QuasiStatic(_Newton):
         self.displacement = displacement
 
     def step(self, sim, dt):
+        """Advance `sim` by dt with Newton (integrator protocol: called by Simulation.step)."""
         p, grid = sim.particles, sim.grid
         sim.locate_and_shape()
         m = sim.nodal_mass()

@@ -1,23 +1,39 @@
 """Output: periodic particle (VTU) and grid (XDMF) output of a run (Simulation.run(output=...))."""
+import os
+
 import numpy as np
 
 from .particle_writer import ParticleWriter
 
 
 class Output:
-    """Periodic output: particles as VTU (+ .pvd/.pvtu) and nodal fields as XDMF."""
+    """Periodic output of a run, `sim.run(..., output=fm.Output(path, every))`: particles as
+    VTU (path/particles.pvd, with .pvtu pieces in parallel) and the nodal velocity and mass
+    as XDMF (path/grid.xdmf), every `every` steps. `particle_fields` names particle arrays
+    (fenicsmpm.particles.FIELDS, history `state`, optional fields such as `body`, or
+    "stress_smoothed"); they are checked when the run starts."""
 
     def __init__(self, path, every=10, particle_fields=("v", "u", "stress", "mass", "V", "id"),
                  grid_fields=True):
         if not (isinstance(every, (int, np.integer)) and every >= 1):
             raise ValueError(f"Output: 'every' must be a positive integer, got {every!r}")
+        if not isinstance(path, (str, os.PathLike)):
+            raise TypeError(f"Output: 'path' must be a directory name, got {type(path).__name__}")
+        if isinstance(particle_fields, str) or not all(isinstance(f, str) for f in particle_fields):
+            raise TypeError(f"Output: 'particle_fields' must be a sequence of field names, got "
+                            f"{particle_fields!r}")
         self.path, self.every = str(path), int(every)
         self.particle_fields, self.grid_fields = particle_fields, grid_fields
         self._pw = self._xdmf = None
         self._mode = "w"
 
     def open(self, sim):
-        import os
+        """Create the directory and writers (collective; called by Simulation.run)."""
+        known = set(sim.particles.field_names()) | {"stress_smoothed"}
+        unknown = [f for f in self.particle_fields if f not in known]
+        if unknown:
+            raise ValueError(f"Output: 'particle_fields' {unknown} are not particle fields; "
+                             f"choose from {sorted(known)}")
         err = None
         if sim.comm.rank == 0:
             try:
@@ -43,6 +59,7 @@ class Output:
             self._dens = fem.Function(fem.FunctionSpace(sim.grid.mesh, ("Lagrange", 1)), name="mass")
 
     def write(self, sim):
+        """Write the current particles and nodal fields (collective)."""
         p = sim.particles
         smooth = sim.smoothed_stress() if "stress_smoothed" in self.particle_fields else None
         fields = {f: smooth if f == "stress_smoothed" else getattr(p, f) for f in self.particle_fields}
@@ -54,11 +71,12 @@ class Output:
             self._xdmf.write_function(self._dens, sim.t)
 
     def close(self):
+        """Close the grid XDMF file (the particle writer closes each file as it goes)."""
         if self._xdmf is not None:
             self._xdmf.close()
             self._xdmf = None
 
     @property
     def pvd(self):
-        import os
+        """The path of the particles' ParaView collection (particles.pvd)."""
         return os.path.join(self.path, "particles.pvd")

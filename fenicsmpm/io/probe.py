@@ -1,5 +1,6 @@
 """Probe: the time series of fields at one particle (Simulation.probe)."""
 import numpy as np
+from mpi4py import MPI
 
 from .probe_writer import ProbeWriter
 
@@ -8,27 +9,62 @@ PROBE_FIELDS = {"velocity": "v", "displacement": "u", "position": "x", "stress":
 
 
 class Probe:
-    """Time series of fields at the particle nearest to a point (answered by its owner rank)."""
+    """Time series of fields at one particle: the particle whose initial position is nearest
+    to `point` (answered by the rank that owns it; made by Simulation.probe).
+
+    The particle is chosen once, when the probe is made, and followed by its id as it moves and
+    migrates between ranks. `particle_id`, `particle_x0` (its initial position) and `distance`
+    (from `point`) say which one; `ties` counts the other particles at the same distance (a
+    point on a cell face or between particle rows), the smallest id among them being chosen.
+    `str(probe)` says all this in one line. A point outside the mesh raises a ValueError."""
 
     def __init__(self, sim, point, fields, path, every):
         p = sim.particles
-        point = np.asarray(point, dtype=np.float64)
+        comm = sim.comm
+        if isinstance(fields, str):
+            fields = [fields]
         bad = [f for f in fields if f not in PROBE_FIELDS]
-        if bad:
-            raise ValueError(f"probe: unknown field(s) {bad}; choose from {sorted(PROBE_FIELDS)}")
-        if point.shape != (sim.gdim,):
-            raise ValueError(f"probe: 'point' must have length {sim.gdim}, got {point.shape}")
+        if bad or not len(fields):
+            raise ValueError(f"probe: unknown field(s) {bad}; 'fields' must name some of "
+                             f"{sorted(PROBE_FIELDS)}")
+        try:
+            point = np.asarray(point, dtype=np.float64)
+        except (TypeError, ValueError):
+            point = np.zeros(0)
+        if point.shape != (sim.gdim,) or not np.all(np.isfinite(point)):
+            raise ValueError(f"probe: 'point' must be {sim.gdim} finite coordinates, got {point!r}")
+        if not (isinstance(every, (int, np.integer)) and not isinstance(every, bool) and every >= 1):
+            raise ValueError(f"probe: 'every' must be a positive integer, got {every!r}")
+        cell, _ = sim.grid.locate(point[None, :])
+        inside = int(cell[0] >= 0)
+        if comm.size > 1:
+            inside = comm.allreduce(inside)
+        if not inside:
+            raise ValueError(f"probe: 'point' {tuple(point.tolist())} lies outside the mesh")
         x0 = p.x - p.u
-        dist = np.linalg.norm(x0 - point, axis=1) if len(p) else np.array([np.inf])
-        k = int(np.argmin(dist))
-        best = (float(dist[k]), sim.comm.rank)
-        if sim.comm.size > 1:
-            best = min(sim.comm.allgather(best))
-        self.owner = best[1]
-        self.sim, self.fields, self.every = sim, list(fields), every
-        self.pid = int(p.id[k]) if sim.comm.rank == self.owner else -1
-        if sim.comm.size > 1:
-            self.pid = sim.comm.bcast(self.pid, root=self.owner)
+        dist = np.linalg.norm(x0 - point, axis=1)
+        dmin = float(dist.min()) if len(p) else np.inf
+        if comm.size > 1:
+            dmin = comm.allreduce(dmin, op=MPI.MIN)
+        if not np.isfinite(dmin):
+            raise ValueError("probe: the simulation has no particles")
+        near = np.flatnonzero(dist <= dmin + 1e-9 * sim.grid.h)      # ties: equal distance
+        pid = int(p.id[near].min()) if len(near) else np.iinfo(np.int64).max
+        n_near = len(near)
+        if comm.size > 1:
+            pid = comm.allreduce(pid, op=MPI.MIN)
+            n_near = comm.allreduce(n_near)
+        hit = np.flatnonzero(p.id == pid)
+        k = int(hit[0]) if len(hit) else -1
+        owner = comm.rank if k >= 0 else comm.size
+        self.owner = comm.allreduce(owner, op=MPI.MIN) if comm.size > 1 else owner
+        self.sim, self.fields, self.every = sim, list(fields), int(every)
+        self.point = tuple(point.tolist())
+        self.pid = self.particle_id = pid
+        xk = x0[k].tolist() if k >= 0 else None
+        self.particle_x0 = tuple(comm.bcast(xk, root=self.owner) if comm.size > 1 else xk)
+        self.distance = dmin
+        self.ties = n_near - 1
         self._idx = k if sim.comm.rank == self.owner else -1
         self._version = p.version
         self.rows = []
@@ -45,6 +81,14 @@ class Probe:
             self.writer = ProbeWriter(path, cols, sim.comm, append=True)
         self.record()
 
+    def __str__(self):
+        tie = (f"; {self.ties} other particle(s) at the same distance, the smallest id chosen"
+               if self.ties else "")
+        x0 = ", ".join(f"{c:.6g}" for c in self.particle_x0)
+        pt = ", ".join(f"{c:.6g}" for c in self.point)
+        return (f"probe at ({pt}): particle {self.particle_id}, initial position ({x0}), "
+                f"distance {self.distance:.3g}{tie}")
+
     def _components(self, f):
         if f == "stress":
             return ["xx", "yy", "zz", "xy", "yz", "xz"][: 6 if self.sim.gdim == 3 else 4]
@@ -59,6 +103,7 @@ class Probe:
         return list(arr)
 
     def record(self):
+        """Append the current values (every `every` steps; called by Simulation.step)."""
         if self.sim.step_count % self.every:
             return
         p = self.sim.particles

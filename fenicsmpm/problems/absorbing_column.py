@@ -38,8 +38,8 @@ c_p reflect a little ((c_p - c_bar) / (c_p + c_bar) ~ 3 % for a long wave). The 
 check therefore compares a rotated roller-free column with the axis-aligned roller-free
 column (rollers=False, angle=0): same physics, only the orientation differs.
 
-Probes: one per depth in `depths` (measured from the loaded surface, default 0, 25, 50, 75,
-100 m), at the particle nearest to the column's centre line at that depth, recording stress,
+Probes: one per depth in `depths` that lies in the column (measured from the loaded surface,
+default 0, 25, 50, 75, 100 m), at the particle nearest to the column's centre line at that depth, recording stress,
 velocity, displacement and position. `histories(probe, exact)` turns a probe's record into
 column-axis components (collective: call it on every rank after the run).
 
@@ -151,7 +151,7 @@ def absorbing_column(integrator, base="viscous", dx=0.5, height=100.0, width=Non
         sim.add_boundary(law)
 
     probes = {}
-    for d in depths:
+    for d in (d for d in depths if d <= height):
         point = R @ np.array([0.5 * width, height - d])
         probes[float(d)] = sim.probe(point, ["stress", "velocity", "displacement", "position"])
     exact = dict(
