@@ -36,7 +36,7 @@ def _rest(scheme, cfl, t_end, h, comm):
              energy_balance_error=float(np.mean(err)))
     cfg = dict(integrator="Explicit", scheme=scheme, shape=sim.shape, h=h, dt=sim.dt, ppc=2,
                cell_type="quadrilateral", cfl=cfl)
-    return common.make_record(f"rest-{scheme}-cfl{cfl}", cfg, sim.particles.n_global,
+    return common.make_record(f"rest-{scheme}-cfl{cfl}", cfg, sim.particles.n_global(),
                               common.global_cells(sim), sim.step_count, wall, m), hh
 
 
@@ -58,7 +58,7 @@ def _incline(base, mu, h, comm):
              error=(along - exact) / exact if exact > 0 else abs(along) / free)
     cfg = dict(integrator=type(sim.integrator).__name__, scheme="MUSL", shape=sim.shape, h=h,
                dt=sim.dt, ppc=2, cell_type="quadrilateral", base=base, mu=mu)
-    return common.make_record(f"incline-{base}-mu{mu}", cfg, sim.particles.n_global,
+    return common.make_record(f"incline-{base}-mu{mu}", cfg, sim.particles.n_global(),
                               common.global_cells(sim), sim.step_count, wall, m)
 
 
