@@ -102,6 +102,7 @@ class SetupMixin:
             integrator.setup(self)
             self._robin = None                    # recompile for the new integrator
         if dt is not None or integrator is not None:
+            self._wave_materials = self._deformable_materials()
             self.dt = self._check_dt(self.dt if dt is None else dt)
         if gravity is not None:
             g = np.asarray(gravity, dtype=np.float64)

@@ -82,6 +82,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         if not (0 < cfl <= 1):
             raise ValueError(f"Simulation: 'cfl' must be in (0, 1], got {cfl!r}")
         self.cfl = cfl
+        self._wave_materials = self._deformable_materials()
         self.dt = self._check_dt(dt)
         if not (isinstance(mass_tolerance, (int, float, np.floating)) and 0 < mass_tolerance < 1):
             raise ValueError(f"Simulation: 'mass_tolerance' must be a number in (0, 1), got {mass_tolerance!r}")
@@ -138,19 +139,35 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             self.fixed[:, 0] = np.abs(g.node_x[:, 0]) <= 1e-9 * g.h
         self.robin_u = np.zeros((g.n_nodes, d))
 
+    def _deformable_materials(self):
+        """The materials of particles that deform: those of rigid bodies (fm.ExplicitContact's
+        `rigid`; they carry no stress) do not limit the explicit time step (issue 21).
+        Collective; all materials when every body is rigid."""
+        p = self.particles
+        rigid = list(getattr(self.integrator, "rigid", None) or ())
+        if not rigid:
+            return list(p.materials)
+        from .contact.multi_velocity import body_ids
+        used = np.zeros(len(p.materials), dtype=np.int64)
+        used[np.unique(p.material_id[~np.isin(body_ids(p), rigid)])] = 1
+        if self.comm.size > 1:
+            used = self.comm.allreduce(used)
+        return [m for m, u in zip(p.materials, used) if u] or list(p.materials)
+
     @property
     def dt_critical(self):
-        """Explicit stability limit: stability_factor * h / max c_p, where an integrator's
+        """Explicit stability limit: stability_factor * h / max c_p (over the materials of the
+        deformable particles, _deformable_materials), where an integrator's
         `stability_factor` (default 1, symplectic Euler / central difference) scales the
         central-difference limit, e.g. Omega_s(rho_b) / 2 for explicit generalized-alpha."""
-        c = max(m.p_wave_speed for m in self.particles.materials)
+        c = max(m.p_wave_speed for m in self._wave_materials)
         return getattr(self.integrator, "stability_factor", 1.0) * self.grid.h / c
 
     @property
     def courant(self):
         """Courant number dt max c_p / h of the current step (reported on the progress line of
         implicit runs; explicit runs are limited to their stability factor)."""
-        c = max(m.p_wave_speed for m in self.particles.materials)
+        c = max(m.p_wave_speed for m in self._wave_materials)
         return self.dt * c / self.grid.h
 
     def _check_dt(self, dt):

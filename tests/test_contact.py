@@ -177,3 +177,19 @@ def test_contact_keeps_rollers():
     sim.observe(lambda s: worst.append(np.abs(s.nodal["body_velocity"][roller, 0, 0]).max(initial=0.0)))
     sim.run(t_end=0.02)
     assert max(worst) == 0.0, max(worst)
+
+
+def test_rigid_body_material_does_not_set_the_time_step():
+    """dt="auto" follows the deformable bodies only: a rigid body of a stiff material (E 1e12)
+    pressing on a soft block (E 1e6) leaves dt = cfl h / c_p(soft) (issue 21)."""
+    grid = _grid(1.0, 1.0, 10)
+    soft = fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)
+    stiff = fm.LinearElastic(E=1e12, nu=0.3, density=1000.0)
+    blk = fm.Particles.fill(grid, soft, per_cell=2, region=lambda x: x[:, 1] < 0.5)
+    rig = fm.Particles.fill(grid, stiff, per_cell=2, region=lambda x: (x[:, 1] > 0.5) & (x[:, 1] < 0.7))
+    sim = fm.Simulation(grid, blk + rig, fm.ExplicitContact("MUSL", rigid={1: (0.0, -0.01)}),
+                        dt="auto")
+    assert abs(sim.dt / (0.5 * grid.h / soft.p_wave_speed) - 1) < 1e-12, sim.dt
+    sim.run(steps=5)
+    sim2 = fm.Simulation(grid, blk + rig, fm.ExplicitContact("MUSL"), dt="auto")   # both deform
+    assert abs(sim2.dt / (0.5 * grid.h / stiff.p_wave_speed) - 1) < 1e-12, sim2.dt
