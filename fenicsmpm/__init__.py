@@ -35,7 +35,7 @@ from .boundaries import CompliantBase, InputMotion, compliant_base, rigid_base
 from .simulation import Simulation
 from .io import Probe, Output
 from .errors import CheckpointNotFoundError, ParticlesLeftMesh
-from .compiler_log import silence_compiler_output
+from .io.compiler_log import silence_compiler_output
 from . import partition
 
 silence_compiler_output()

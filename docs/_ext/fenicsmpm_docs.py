@@ -44,7 +44,7 @@ MODULES = [
     ("fenicsmpm.materials.initial_stress", "Initial (K0) stress"),
     ("fenicsmpm.boundaries.friction", "Rough and frictional bases"),
     ("fenicsmpm.errors", "Exceptions"),
-    ("fenicsmpm.compiler_log", "Form-compiler output"),
+    ("fenicsmpm.io.compiler_log", "Form-compiler output"),
     ("fenicsmpm.io", "Probe and output writers"),
     ("fenicsmpm.bench", "Benchmark suite"),
     ("fenicsmpm.bench.common", "Benchmark JSON format and helpers"),
