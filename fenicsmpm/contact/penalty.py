@@ -37,6 +37,28 @@ vertex force goes to its body's nodes (eq 2.52) with the weights N_i m_i^b / W_v
 to one; mass weighting gives every node the same acceleration, so nodes with little mass at
 the body's edge do not blow up) as external nodal force, F^cont of eq 2.53.
 
+Initial state (PenaltyContact.preload, at the first step). A penalty spring carries force
+only once it is compressed, so a body that starts with a stress in equilibrium with a
+contact traction (e.g. a geostatic block on a base) would find its contact face unsupported
+at t = 0: the face falls into the springs, the release sends a stress wave of the size of
+the static stress through the body, the normal force oscillates by tens of per cent and
+every dip below |f_t|/mu lets the face slip a little, always down the slope (a block that
+must stick on a 30 deg rigid incline with mu = 0.7 crept 13.7 mm in 0.5 s, 2.2 % of the
+frictionless slide; with a gravity ramp from a stress-free state, 0.04 %). So the springs
+start in equilibrium with the stress: the traction t = sigma n at each vertex of a
+deformable body is taken from its particles' stress (a least-squares linear fit over those
+within 1.5 h, extrapolated to the vertex, so a linear stress is exact on the boundary); for
+each vertex s touching a facing segment of another body (g_n < 1e-6 h), with t_s the
+traction on the slave's body (minus the master's, interpolated at xi, when the slave is
+rigid), p = t_s . e_n > 0 and tau = t_s . e_t,
+    f_t^old = w l_s tau (capped at mu w l_s p),
+    x_s -= (p / k_n + g_n) e_n   (deformable slave; half of it when the master is deformable),
+i.e. the vertices start at the penetration g_n = -p / k_n whose penalty force carries p (in
+both passes, as the other body's vertices then see the same penetration) and the slip spring
+holds the shear. A shift of p / k_n is the penetration the penalty allows anyway (here
+0.06 mm against h = 0.1 m). Stress-free bodies, and bodies that do not touch at the start,
+are unchanged (t = 0 or no pair).
+
 MPI. The polylines are replicated on every rank (O(surface) memory and work per rank). Each
 vertex is owned by one rank (the highest rank that has it in an owned cell); the owner
 interpolates W_v and v_v and evaluates the pairs of its slave vertices; allreduces sum W_v,
@@ -206,6 +228,41 @@ def map_vertex_forces(own, nodes, N, vbody, present, m_b, W, rigid, F, out):
 
 
 @njit(cache=True)
+def nearest_segment(s, x, vbody, seg, sbody, vn, W, rigid, lo, w, nbx, nby, start, items, depth):
+    """Steps 2-3 of the detection (module docstring) for vertex s: (segment, g_n, xi) of the
+    other bodies' segment of least |g_n| <= depth that faces s, with xi in [0, 1]; segment -1
+    if none."""
+    a = vbody[s]
+    bx = int((x[s, 0] - lo[0]) / w)
+    by = int((x[s, 1] - lo[1]) / w)
+    best, gbest, xbest = -1, 0.0, 0.0
+    for ix in range(max(bx - 1, 0), min(bx + 2, nbx)):      # step 2: nearby segments
+        for iy in range(max(by - 1, 0), min(by + 2, nby)):
+            key = ix * nby + iy
+            for e in range(start[key], start[key + 1]):
+                sg = items[e]
+                b = sbody[sg]
+                if b == a:
+                    continue
+                i1, i2 = seg[sg, 0], seg[sg, 1]
+                if not rigid[b] and (W[i1] <= 0.0 or W[i2] <= 0.0):
+                    continue
+                tx, ty = x[i2, 0] - x[i1, 0], x[i2, 1] - x[i1, 1]
+                L = np.sqrt(tx * tx + ty * ty)
+                tx /= L
+                ty /= L
+                rx, ry = x[s, 0] - x[i1, 0], x[s, 1] - x[i1, 1]
+                xi = (rx * tx + ry * ty) / L          # eq 2.43
+                g = rx * ty - ry * tx                 # eq 2.42, e_n = (t_y, -t_x)
+                if (xi < 0.0 or xi > 1.0 or abs(g) > depth
+                        or ty * vn[s, 0] - tx * vn[s, 1] > -0.5):  # not facing the slave
+                    continue
+                if best < 0 or abs(g) < abs(gbest):
+                    best, gbest, xbest = sg, g, xi
+    return best, gbest, xbest
+
+
+@njit(cache=True)
 def penalty_pairs(own, nodes, present, x, du, vbody, seg, sbody, ltrib, vn, W, rigid, lo, w, nbx,
                   nby, start, items, k_n, k_t, mu, depth, ft_old, F, ft_new, stats):
     """Detection and forces of the module docstring for the owned slave vertices `own`
@@ -230,32 +287,8 @@ def penalty_pairs(own, nodes, present, x, du, vbody, seg, sbody, ltrib, vn, W, r
                 break
         if not shared:
             continue
-        bx = int((x[s, 0] - lo[0]) / w)
-        by = int((x[s, 1] - lo[1]) / w)
-        best, gbest, xbest = -1, 0.0, 0.0
-        for ix in range(max(bx - 1, 0), min(bx + 2, nbx)):      # step 2: nearby segments
-            for iy in range(max(by - 1, 0), min(by + 2, nby)):
-                key = ix * nby + iy
-                for e in range(start[key], start[key + 1]):
-                    sg = items[e]
-                    b = sbody[sg]
-                    if b == a:
-                        continue
-                    i1, i2 = seg[sg, 0], seg[sg, 1]
-                    if not rigid[b] and (W[i1] <= 0.0 or W[i2] <= 0.0):
-                        continue
-                    tx, ty = x[i2, 0] - x[i1, 0], x[i2, 1] - x[i1, 1]
-                    L = np.sqrt(tx * tx + ty * ty)
-                    tx /= L
-                    ty /= L
-                    rx, ry = x[s, 0] - x[i1, 0], x[s, 1] - x[i1, 1]
-                    xi = (rx * tx + ry * ty) / L          # eq 2.43
-                    g = rx * ty - ry * tx                 # eq 2.42, e_n = (t_y, -t_x)
-                    if (xi < 0.0 or xi > 1.0 or abs(g) > depth
-                            or ty * vn[s, 0] - tx * vn[s, 1] > -0.5):  # not facing the slave
-                        continue
-                    if best < 0 or abs(g) < abs(gbest):
-                        best, gbest, xbest = sg, g, xi
+        best, gbest, xbest = nearest_segment(s, x, vbody, seg, sbody, vn, W, rigid, lo, w, nbx,
+                                             nby, start, items, depth)
         if best < 0 or gbest >= 0.0:                  # step 3: eq 2.51
             continue
         b = sbody[best]
@@ -311,6 +344,7 @@ class PenaltyContact:
         self.ft = np.zeros(len(self.x))
         self.stats = dict(pairs=0, max_penetration=0.0, slipping=0)
         self._warned_dt = False
+        self._preloaded = False
 
     def _allreduce(self, comm, a, op=None):
         if comm.size == 1:
@@ -330,6 +364,82 @@ class PenaltyContact:
                 warnings.warn(f"ExplicitContact(penalty): dt = {sim.dt:.4g} s exceeds the penalty "
                               f"spring's stable step sqrt(rho h / k_n) = {self.dt_penalty:.4g} s; "
                               f"lower k_n (about (K + 4G/3)/h) or dt", RuntimeWarning, stacklevel=3)
+
+    def boundary_traction(self, sim, rigid, vn):
+        """t_v = sigma(x_v) n_v (n_v the vertex's outward normal) at the vertices of the
+        deformable bodies, sigma the body's particle stress (the one the internal force sees)
+        extrapolated to x_v by a least-squares linear fit over its particles within 1.5 h
+        (the mean where they are too few for a fit); 0 at rigid vertices and where no particle
+        of the body is near. Summed over ranks."""
+        from scipy.spatial import cKDTree
+        from .multi_velocity import body_ids
+        p, h = sim.particles, sim.grid.h
+        nvx = len(self.x)
+        acc = np.zeros((nvx, 3, 6))                   # sum w [1 dx dy]^T [1 dx dy | sxx syy sxy]
+        sig = sim.dynamic_stress(p.stress)
+        for b in np.unique(self.vbody):
+            if rigid[b]:
+                continue
+            sel = np.flatnonzero(body_ids(p) == b)
+            verts = np.flatnonzero(self.vbody == b)
+            if len(sel) == 0:
+                continue
+            tree = cKDTree(p.x[sel, :2])
+            for v, near in zip(verts, tree.query_ball_point(self.x[verts], 1.5 * h)):
+                if not near:
+                    continue
+                q = sel[near]
+                P = np.column_stack([np.ones(len(q)), (p.x[q, :2] - self.x[v]) / h])
+                S = np.column_stack([sig[q, 0, 0], sig[q, 1, 1], sig[q, 0, 1]])
+                acc[v, :, :3] = P.T @ P
+                acc[v, :, 3:] = P.T @ S
+        acc = self._allreduce(sim.comm, acc)
+        t = np.zeros_like(self.x)
+        for v in np.flatnonzero(acc[:, 0, 0] > 0):
+            A, B = acc[v, :, :3], acc[v, :, 3:]
+            if np.linalg.cond(A) < 1e6:
+                c = np.linalg.solve(A, B)[0]          # the fit's value at x_v
+            else:
+                c = B[0] / A[0, 0]                    # the mean
+            s2 = np.array([[c[0], c[2]], [c[2], c[1]]])
+            t[v] = s2 @ vn[v]
+        return t
+
+    def preload(self, sim, rigid, mu, ltrib, vn, W, lo, w, nbx, nby, start, items, depth):
+        """Start the penalty springs in equilibrium with the bodies' initial stress (module
+        docstring, "Initial state"): for each vertex s touching a facing segment of another
+        body (g_n < 1e-6 h), with t the traction on the slave's body there (its own
+        boundary_traction, or minus the master's interpolated when the slave is rigid),
+        p = t . e_n and tau = t . e_t: f_t^old = w l_s tau (capped at mu p), and the
+        deformable vertices are moved along -e_n so that g_n = -p / k_n (half each when both
+        bodies are deformable), the penetration whose penalty force carries p. Every rank does
+        the same work on the replicated polylines."""
+        t = self.boundary_traction(sim, rigid, vn)
+        wt = 0.5
+        shift = np.zeros_like(self.x)
+        ft0 = np.zeros(len(self.x))
+        for s in range(len(self.x)):
+            best, g, xi = nearest_segment(s, self.x, self.vbody, self.seg, self.sbody, vn, W, rigid,
+                                          lo, w, nbx, nby, start, items, depth)
+            if best < 0 or g >= 1e-6 * sim.grid.h:
+                continue
+            a, b = self.vbody[s], self.sbody[best]
+            i1, i2 = self.seg[best]
+            et = self.x[i2] - self.x[i1]
+            et /= np.linalg.norm(et)
+            en = np.array([et[1], -et[0]])
+            if rigid[a] and rigid[b]:
+                continue
+            ts = -((1.0 - xi) * t[i1] + xi * t[i2]) if rigid[a] else t[s]
+            pn, tau = float(ts @ en), float(ts @ et)
+            if pn <= 0.0:
+                continue
+            cap = mu[a, b] * pn
+            ft0[s] = wt * ltrib[s] * float(np.clip(tau, -cap, cap))
+            if not rigid[a]:
+                shift[s] -= (pn / self.k_n + g) * (1.0 if rigid[b] else 0.5) * en
+        self.x += shift
+        self.ft = ft0
 
     def forces(self, sim, present, m_b, rigid, mu, dt):
         """Locate the vertices, find the pairs and return the nodal contact forces
@@ -353,14 +463,18 @@ class PenaltyContact:
         W = np.zeros(len(self.x))
         vertex_weights(own, self._nodes, self._N, self.vbody, present, m_b, W)
         self.W = W = self._allreduce(comm, W)
-        ltrib = np.zeros(len(self.x))
-        vn = np.zeros_like(self.x)
-        lmax = tributary(self.x, self.seg, ltrib, vn)
-        depth = grid.h
-        w = depth + 0.5 * lmax
-        lo = self.x.min(axis=0) - w
-        nbx, nby = (int(v) for v in (self.x.max(axis=0) - lo) // w + 2)
-        start, items = bin_segments(self.x, self.seg, lo, w, nbx, nby)
+        for rep in range(1 if self._preloaded else 2):
+            ltrib = np.zeros(len(self.x))
+            vn = np.zeros_like(self.x)
+            lmax = tributary(self.x, self.seg, ltrib, vn)
+            depth = grid.h
+            w = depth + 0.5 * lmax
+            lo = self.x.min(axis=0) - w
+            nbx, nby = (int(v) for v in (self.x.max(axis=0) - lo) // w + 2)
+            start, items = bin_segments(self.x, self.seg, lo, w, nbx, nby)
+            if not self._preloaded:           # the springs in equilibrium with the stress
+                self._preloaded = True
+                self.preload(sim, rigid, mu, ltrib, vn, W, lo, w, nbx, nby, start, items, depth)
         nvx = len(self.x)
         buf = np.zeros(3 * nvx + 3)                   # F (nv, 2), ft, stats
         F, ft, stats = buf[: 2 * nvx].reshape(nvx, 2), buf[2 * nvx: 3 * nvx], buf[3 * nvx:]
