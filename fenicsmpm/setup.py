@@ -35,6 +35,20 @@ class SetupMixin:
         A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1])."""
         self.fixed |= fixed_dofs(self.grid, where, components)
 
+    def reaction(self, where=None):
+        """The total force that the fixed dofs at the nodes where(x) (default: all fixed
+        nodes) exerted on the material in the last step, from sim.nodal["reaction"]
+        (fm.Explicit, with or without prescribed motion, and fm.QuasiStatic); summed over
+        ranks: collective, call it on every rank."""
+        R = self.nodal.get("reaction")
+        if R is None:
+            raise ValueError(f"reaction: {type(self.integrator).__name__} reports no reaction "
+                             f"(fm.Explicit and fm.QuasiStatic do), or no step has run yet")
+        own = self.grid.n_owned_nodes
+        sel = np.ones(own, dtype=bool) if where is None else self.grid.nodes_where(where)[:own]
+        r = R[:own][sel].sum(axis=0)
+        return self.comm.allreduce(r) if self.comm.size > 1 else r
+
     def add_particle_load(self, region, value):
         """A force value(t) (a vector; per unit thickness in 2D) shared equally by the particles
         selected by region(x) now, mapped to the grid with their shape functions,

@@ -38,9 +38,18 @@ class Explicit:
     records_work = True
     supports_friction = True
 
-    def __init__(self, scheme="MUSL", flip=None, transfer=None):
-        """scheme: one of SCHEMES; transfer: "apic" or "flip" (default: "flip" when `flip` is
-        given, else "flip"); flip: the FLIP fraction of transfer="flip" (default 1)."""
+    def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None):
+        """scheme: one of SCHEMES; transfer: "apic" or "flip" (default "flip"); flip: the FLIP
+        fraction of transfer="flip" (default 1).
+
+        displacement: None, or u(x, t) -> (n, gdim) for prescribed motion: the fixed dofs
+        (sim.fix) move with the velocity (u(x, t + dt) - u(x, t)) / dt in the step (x the node
+        coordinates) instead of resting; the force the fixed dofs exert on the material,
+        R = m (v - v*) / dt with v* the unconstrained velocity, is sim.nodal["reaction"]
+        (summed over ranks), as fm.QuasiStatic(displacement=...) gives it."""
+        if displacement is not None and not callable(displacement):
+            raise TypeError(f"Explicit: 'displacement' must be None or u(x, t), got {displacement!r}")
+        self.displacement, self._vp = displacement, None
         scheme = str(scheme).upper()
         if scheme not in SCHEMES:
             raise ValueError(f"Explicit: 'scheme' must be one of {SCHEMES}, got {scheme!r}")
@@ -59,6 +68,19 @@ class Explicit:
     def setup(self, sim):
         if self.transfer == "apic":
             sim.particles.add_field("apic_C", (sim.gdim, sim.gdim))
+
+    def _prescribed(self, sim, dt):
+        """(u(x, t + dt) - u(x, t)) / dt on the fixed dofs (x the node coordinates), or None
+        without prescribed motion."""
+        if self.displacement is None:
+            return None
+        x = sim.grid.node_x
+        du = (np.asarray(self.displacement(x, sim.t + dt), dtype=float)
+              - np.asarray(self.displacement(x, sim.t), dtype=float))
+        if du.shape != x.shape or not np.all(np.isfinite(du)):
+            raise ValueError(f"Explicit: 'displacement' must return finite values of shape "
+                             f"{x.shape} for the node coordinates, got shape {du.shape}")
+        return np.where(sim.fixed, du / dt, 0.0)
 
     def _p2g(self, sim, v, x, with_mass):
         """Nodal mass (with_mass) and momentum of particle velocities v at positions x, local
@@ -85,6 +107,8 @@ class Explicit:
         for b, g in zip(sim.frictions, self._gaps):
             b.apply(v, g, dt, mass)
         v *= ~sim.fixed
+        if self._vp is not None:
+            v += self._vp
 
     def _hold(self, sim, v, dt):
         """A velocity the stress update sees keeps the contact the trial projection decided
@@ -115,6 +139,9 @@ class Explicit:
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
         free = ~sim.fixed
         v0 = self._grid_velocity(mv, inv_m, free)
+        vp = self._vp = self._prescribed(sim, dt)      # fixed dofs' velocity this step
+        if vp is not None:
+            v0 += vp
         if sim.frictions:                # nodes in contact start as fixed nodes do (last status)
             self._hold(sim, v0, dt)
         T["solve"] += time.perf_counter() - t0
@@ -131,6 +158,10 @@ class Explicit:
             f += fr
         t1 = time.perf_counter()
         v1 = v0 + dt * f * inv_m[:, None] * free
+        reaction = np.where(sim.fixed & active[:, None],          # R = m (v - v*) / dt
+                            m[:, None] * (v1 - (mv + dt * f) * inv_m[:, None]) / dt, 0.0)
+        if vp is not None:                          # the work of moving the fixed dofs
+            fr = reaction if fr is None else fr + reaction
         if sim.frictions:                           # contact force m (v1 - v1_trial) / dt
             v_trial = v1.copy()
             self._contact(sim, v1, dt, m)
@@ -151,12 +182,14 @@ class Explicit:
             _, mv2 = self._p2g(sim, p.v, x_start, False)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
+            if vp is not None:
+                v1 += vp
             self._hold(sim, v1, dt)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             self._stress_update(sim, v1, dt if self.scheme != "AVG" else 0.5 * dt)
         if sim.robin is not None:
             sim.robin_u += dt * v1
-        sim.nodal = dict(mass=m, velocity=v1, active=active)
+        sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction)
         np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
         p.a /= dt
