@@ -98,14 +98,18 @@ def test_rough_base_under_explicit_contact(theta, mu):
         assert abs(along - 0.5 * a * t ** 2) < 0.02 * 0.5 * a * t ** 2, (along, 0.5 * a * t ** 2)
 
 
-@pytest.mark.parametrize("mu", [0.7, 0.3, 0.0])
-def test_block_on_rigid_incline_body(mu):
-    """The incline as a rigid body (multi-velocity contact, exact gap against the rigid
-    body's particles, prescribed normal), 30 deg, 0.5 s from the geostatic state: mu = 0.7
-    sticks (measured 0.55 mm, < 0.5 % of the frictionless 613 mm; before: 156 mm) and does
-    not sink (measured 0.03 mm; before: 24 mm); mu = 0.3 within 2 % of a t^2 / 2 (measured
-    -0.02 %; before +10 %), mu = 0 within 0.5 % (measured -0.04 %)."""
-    sim, hist = block_on_rigid_body(mu)
+@pytest.mark.parametrize("algorithm,mu", [("multi-velocity", 0.7), ("multi-velocity", 0.3),
+                                          ("multi-velocity", 0.0), ("penalty", 0.7), ("penalty", 0.3)])
+def test_block_on_rigid_incline_body(algorithm, mu):
+    """The incline as a rigid body, 30 deg, 0.5 s from the geostatic state. Multi-velocity
+    (exact gap against the rigid body's particles, prescribed normal; h = 0.05): mu = 0.7
+    sticks (measured 0.55 mm, < 0.5 % of the frictionless 613 mm; before: 156 mm) and does not
+    sink (measured 0.03 mm; before: 24 mm); mu = 0.3 within 2 % of a t^2 / 2 (measured
+    -0.02 %; before +10 %), mu = 0 within 0.5 % (measured -0.04 %). Penalty (polylines on
+    both faces, h = 0.1; the springs start in equilibrium with the initial stress,
+    contact.penalty "Initial state"): mu = 0.7 measured 0.11 % (before 2.2 %: 13.7 mm),
+    mu = 0.3 +0.19 %."""
+    sim, hist = block_on_rigid_body(mu, algorithm=algorithm, h=0.05 if algorithm != "penalty" else 0.1)
     sim.run(t_end=0.5)
     h = np.array(hist)
     th = np.radians(30.0)
@@ -114,7 +118,8 @@ def test_block_on_rigid_incline_body(mu):
     assert h[:, 2].min() > -0.5e-3, h[:, 2].min()          # no sinking into the rigid body
     if a <= 0:
         assert abs(along) < 0.005 * 0.5 * G * np.sin(th) * t ** 2, along
-        assert h[:, 2].max() < 0.05e-3, h[:, 2].max()      # no lift
+        if algorithm != "penalty":
+            assert h[:, 2].max() < 0.05e-3, h[:, 2].max()  # no lift
     else:
         exact = 0.5 * a * t ** 2
         assert abs(along - exact) < (0.005 if mu == 0 else 0.02) * exact, (along, exact)
@@ -130,24 +135,3 @@ def test_block_rests_on_rough_base_with_wide_shapes(shape):
     assert h[:, 2].max() < 0.05e-3, h[:, 2].max()
     late = -h[:, 2][h[:, 0] > 1.0].mean()
     assert 0.85 * STATIC < late < 1.02 * STATIC, (late, STATIC)
-
-
-@pytest.mark.parametrize("mu", [0.7, 0.3])
-def test_block_on_rigid_incline_body_penalty(mu):
-    """The incline as a rigid body under penalty contact (polylines on both faces), 30 deg,
-    h = 0.1, 0.5 s from the geostatic state: the penalty springs start in equilibrium with
-    the initial stress (contact.penalty, "Initial state"), so mu = 0.7 sticks (< 0.5 % of the
-    frictionless 613 mm; measured 0.11 %, before 2.2 %: 13.7 mm) and mu = 0.3 slides within
-    2 % of a t^2 / 2 (measured +0.19 %)."""
-    sim, hist = block_on_rigid_body(mu, algorithm="penalty", h=0.1)
-    sim.run(t_end=0.5)
-    h = np.array(hist)
-    th = np.radians(30.0)
-    t, along = h[-1, 0], h[-1, 1]
-    a = G * (np.sin(th) - mu * np.cos(th))
-    assert h[:, 2].min() > -0.5e-3, h[:, 2].min()          # no sinking into the rigid body
-    if a <= 0:
-        assert abs(along) < 0.005 * 0.5 * G * np.sin(th) * t ** 2, along
-    else:
-        exact = 0.5 * a * t ** 2
-        assert abs(along - exact) < 0.02 * exact, (along, exact)
