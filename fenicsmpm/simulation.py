@@ -22,7 +22,7 @@ from .kernels import transfer as kt
 from .kernels.smoothing import smoothed_stress
 from .materials.regularisation import regularise
 from .setup import SetupMixin
-from .shapes import resolve_shape, standard as ks, wide_shape
+from .shapes import choose_shape, resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
 MANY_STEPS = 1_000_000         # dt="auto" runs longer than this many steps are warned about
@@ -125,7 +125,13 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.shape, self.shape_reason = resolve_shape(self, shape)
         if self.shape != "mpm" and grid.ensure_vertex_ring():   # wide families: vertex ghosts
             self._on_new_mesh()
-        self._wide = wide_shape(self, self.shape)        # GIMP/CPDI evaluator; None for "mpm"
+        try:
+            self._wide = wide_shape(self, self.shape)    # GIMP/CPDI evaluator; None for "mpm"
+        except (ValueError, NotImplementedError) as e:   # a family the mesh cannot support
+            if self.shape_auto:
+                raise
+            raise type(e)(f"Simulation: shape={self.shape!r} is not available here: {e}; "
+                          f"shape='auto' would pick {choose_shape(self)[0]!r}") from e
         integrator.setup(self)
 
     def _on_new_mesh(self):

@@ -66,3 +66,12 @@ def test_wide_family_on_a_default_partitioned_mesh(cell_type, shape):
     drop = (y0 - p.total(p.mass * p.x[:, 1])) / m0
     n = sim.step_count
     assert abs(drop - 0.5 * 10.0 * sim.dt ** 2 * n * (n + 1)) < 1e-9 * drop, drop
+
+
+def test_unsupported_family_says_what_auto_would_pick():
+    """cpGIMP on triangles: ValueError naming the reason and auto's choice (CPDI2)."""
+    msh = mesh.create_rectangle(comm, [[0, 0], [1, 1]], [4, 4], mesh.CellType.triangle)
+    grid = fm.Grid(msh)
+    p = fm.Particles.fill(grid, fm.LinearElastic(E=1e6, nu=0.3, density=1e3))
+    with pytest.raises(ValueError, match="structured grid.*shape='auto' would pick 'cpdi2'"):
+        fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape="cpgimp")
