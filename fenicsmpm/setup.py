@@ -235,6 +235,32 @@ class SetupMixin:
         return pr
 
 
+    def _on_new_mesh(self):
+        """After Grid.ensure_vertex_ring rebuilt the mesh (same cells and owners): locate the
+        particles again and size the nodal arrays for the new numbering (set-up calls that
+        bind nodes come after the constructor)."""
+        g, p, d = self.grid, self.particles, self.gdim
+        p.cell, p.xi = g.locate(p.x)
+        self.fixed = np.zeros((g.n_nodes, d), dtype=bool)
+        if g.axisymmetric:
+            self.fixed[:, 0] = np.abs(g.node_x[:, 0]) <= 1e-9 * g.h
+        self.robin_u = np.zeros((g.n_nodes, d))
+
+    def _deformable_materials(self):
+        """The materials of particles that deform: those of rigid bodies (fm.ExplicitContact's
+        `rigid`; they carry no stress) do not limit the explicit time step (issue 21).
+        Collective; all materials when every body is rigid."""
+        p = self.particles
+        rigid = list(getattr(self.integrator, "rigid", None) or ())
+        if not rigid:
+            return list(p.materials)
+        from .contact.multi_velocity import body_ids
+        used = np.zeros(len(p.materials), dtype=np.int64)
+        used[np.unique(p.material_id[~np.isin(body_ids(p), rigid)])] = 1
+        if self.comm.size > 1:
+            used = self.comm.allreduce(used)
+        return [m for m, u in zip(p.materials, used) if u] or list(p.materials)
+
     def _use_standard_shape(self, reason):
         """shape="auto" falls back to the standard family before the first step (logged)."""
         import logging
