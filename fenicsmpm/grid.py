@@ -269,11 +269,12 @@ class Grid:
         if self.has_vertex_ring():
             return False
         from dolfinx import graph
+        from mpi4py import MPI
         msh, tdim, gdim = self.mesh, self.mesh.topology.dim, self.gdim
         n_own = msh.topology.index_map(tdim).size_local
         gmap = msh.geometry.index_map()
         nv = len(msh.geometry.dofmap.links(0)) if n_own else 0
-        nv = self.comm.allreduce(nv, op=__import__("mpi4py").MPI.MAX)
+        nv = self.comm.allreduce(nv, op=MPI.MAX)
         dofs = msh.geometry.dofmap.array.reshape(-1, nv)[:n_own]
         cells = np.asarray(gmap.local_to_global(dofs.ravel()), dtype=np.int64).reshape(n_own, nv)
         x = np.ascontiguousarray(msh.geometry.x[: gmap.size_local, :gdim])

@@ -83,17 +83,15 @@ class Explicit:
         return np.where(sim.fixed, du / dt, 0.0)
 
     def _p2g(self, sim, v, x, with_mass):
-        """Nodal mass (with_mass) and momentum of particle velocities v at positions x, local
-        (not yet summed over ranks): plain or affine (APIC) by `transfer`."""
+        """Nodal mass (with_mass) and momentum of the particle velocities v (= p.v) at
+        positions x, local (not yet summed over ranks): affine (APIC) by `transfer`, else
+        the simulation's plain P2G."""
+        if self.transfer != "apic":
+            return sim.nodal_mass_momentum() if with_mass else (None, sim.nodal_weighted(v))
         g, p = sim.grid, sim.particles
         m = np.zeros(g.n_nodes) if with_mass else np.zeros(1)
         mv = np.zeros((g.n_nodes, g.gdim))
-        if self.transfer == "apic":
-            kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, v, p.apic_C, x, g.node_x, with_mass, m, mv)
-        elif with_mass:
-            kt.p2g_mass_momentum(g.D, sim.nodes, sim.N, p.mass, v, m, mv)
-        else:
-            kt.p2g_weighted(g.D, sim.nodes, sim.N, p.mass, v, mv)
+        kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, v, p.apic_C, x, g.node_x, with_mass, m, mv)
         return m, mv
 
     def _grid_velocity(self, momentum, inv_m, free):
