@@ -195,6 +195,9 @@ class SetupMixin:
             if self.axisymmetric:
                 raise NotImplementedError("add_boundary: particle-layer boundaries are not "
                                           "implemented on axisymmetric grids; use a mesh boundary")
+            if self.shape != "mpm" and self.shape_auto and self.step_count == 0:
+                self._use_standard_shape("particle-layer boundaries absorb best with the standard "
+                                         "family (W3 reflection 8 % with cpGIMP)")
             boundary.attach(self.particles)
             self.layers.append(boundary)
             self._layer_version = None
@@ -240,6 +243,7 @@ class SetupMixin:
         particles again and size the nodal arrays for the new numbering (set-up calls that
         bind nodes come after the constructor)."""
         g, p, d = self.grid, self.particles, self.gdim
+        self.comm = g.comm        # the old mesh's communicator dies with the old mesh
         p.cell, p.xi = g.locate(p.x)
         self.fixed = np.zeros((g.n_nodes, d), dtype=bool)
         if g.axisymmetric:

@@ -35,6 +35,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     gravity: body acceleration vector (length gdim), default zero.
     mass_tolerance: nodes with mass below this fraction of the largest nodal mass are
     inactive (no velocity, no division by a vanishing mass; constrained in implicit solves).
+    Default 1e-12: the quadratic tails of GIMP weights put masses of 1e-10 on nodes that
+    carry forces, and 1e-9 lost momentum at that level (tests/test_traction.py).
     on_leave: what happens to particles that leave the mesh: "error" (stop with their ids and
     positions) or "remove" (drop them; the removed mass is counted in `removed_mass`, and
     reported as a warning) or "periodic" (re-enter through the opposite periodic face, see
@@ -64,7 +66,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     radial displacement of nodes on the axis r = 0 is fixed."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-9, on_leave="error", max_dt_cuts=0, shape="mpm",
+                 mass_tolerance=1e-12, on_leave="error", max_dt_cuts=0, shape="auto",
                  stress_feedback=None, gravity_ramp=None, force_integration="particles"):
         self.grid = grid
         self.particles = particles

@@ -244,7 +244,7 @@ def run_scene(spec, quick, comm):
         failed, steps = str(err), sim.step_count
         wall = common.gmax(comm, time.perf_counter() - t_start)   # until it stopped, warm-up included
     cfg = dict(integrator=spec["integrator"], scheme="MUSL" if integ.explicit else "Newmark",
-               shape="Q1 (standard MPM)", h=dx, dt=sim.dt, ppc=4, per_cell=2,
+               shape=sim.shape, h=dx, dt=sim.dt, ppc=4, per_cell=2,
                cell_type="quadrilateral", base=spec["base"], group=spec["group"],
                benchmark=spec["bench"], method=spec["method"],
                courant=exact["courant"], height=exact["height"], width=width, t_end=sim.t,

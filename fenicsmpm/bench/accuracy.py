@@ -164,7 +164,7 @@ def _run_v1(series, n_cells, comm, periods, v0):
     if not integ.explicit:
         m["newton_iterations_mean"] = float(np.mean(integ.iterations))
     cfg = dict(problem="V1 vibrating bar", integrator=type(integ).__name__,
-               scheme=getattr(integ, "scheme", "Newmark"), shape="Q1 (standard MPM)", h=h,
+               scheme=getattr(integ, "scheme", "Newmark"), shape=sim.shape, h=h,
                dt=sim.dt, ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
                periods=periods, length=L, E=100.0, density=1.0, v0=v0,
                dt_rule=f"cfl {CFL:g} * h / c" if integ.explicit
@@ -202,7 +202,7 @@ def _run_v2(n_cells, comm):
              newton_iterations_max=max(integ.iterations), setup_s=setup,
              wall_per_step_s=wall / LOAD_STEPS)
     cfg = dict(problem="V2 self-weight column (small strain)", integrator="QuasiStatic",
-               scheme="QuasiStatic", shape="Q1 (standard MPM)", h=exact["h"], dt=sim.dt,
+               scheme="QuasiStatic", shape=sim.shape, h=exact["h"], dt=sim.dt,
                ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
                load_steps=LOAD_STEPS, **V2)
     rec = common.make_record(f"V2 QuasiStatic n={n_cells}", cfg, p.n_global(), common.global_cells(sim),

@@ -140,7 +140,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True, cells=None, t
                 r = incline(theta, mu, alg, h=h, t_end=S["t_end"], comm=comm)
                 sim = r["sim"]
                 cfg = dict(integrator=type(sim.integrator).__name__, scheme="MUSL",
-                           shape="Q1 (standard MPM)", h=h, dt=sim.dt, ppc=4,
+                           shape=sim.shape, h=h, dt=sim.dt, ppc=4,
                            cell_type="quadrilateral", case=case, theta_deg=theta, mu=mu,
                            algorithm=alg, t_end=sim.t)
                 runs.append(common.make_record(

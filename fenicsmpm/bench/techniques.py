@@ -13,6 +13,7 @@ brackets):
   MUSL mpm (baseline), USF, USL, AVG (seed 002 §4.4 half-step order)       [update order]
   GA rho_b=1, 0.8, 0.5 (fm.ExplicitGeneralizedAlpha; quick: 0.8 only)    [update order]
   MUSL cpgimp, MUSL cpdi2 (baselines GIMP and CPDI; full: also ugimp, cpdi1, gauss) [shape]
+  MUSL mpm apic, MUSL cpgimp apic (fm.Explicit(transfer="apic"), Jiang et al. 2015)  [transfer]
   MUSL mpm + split (sim.enable_splitting(2, 0.5, 1), seed 002 §3.4)        [splitting]
   MUSL mpm + smoothed (stress_feedback="smoothed", seed 002 eqs 4.18-4.19)   [stress feedback]
   MUSL mpm + mixed (force_integration="mixed": Gauss points in full cells, particles at
@@ -41,8 +42,8 @@ Problems and error measures (the `error` metric of each run):
           AMPLE stress norm with the exact sigma_yy = -rho g (H - Y), Y = x - u. No
           particle splits there (strains ~12 %), so Y = x - u is exact for every run.
           n = 20 cells (quick 5).
-Not applicable (recorded in "not_applicable", no number invented): wide shapes on W1 (the
-W1 builder absorbing_column takes no shape argument).
+Not applicable (recorded in "not_applicable", no number invented): wide shapes on W1 (not
+run: the column is one cell wide and 1D).
 On V2, W1 and L1 the smoothed feedback and the mixed integration are switched on by setting
 sim.stress_feedback / sim.force_integration after the builder made the Simulation (the
 attributes the constructor arguments set); on the discs the Simulation is rebuilt on the
@@ -91,13 +92,14 @@ W1_T = 1.4
 L1 = dict(height=10.0, E=5e6, nu=0.0, density=6000.0, g=10.0)
 L1_RAMP = 20.0
 BASELINE = "MUSL mpm"
-FAMILIES = ("update order", "shape", "splitting", "stress feedback", "force integration")
+FAMILIES = ("update order", "shape", "transfer", "splitting", "stress feedback",
+            "force integration")
 
 
 def _cfg(name, family, scheme="MUSL", rho_b=None, shape="mpm", split=False, smoothed=False,
-         mixed=False):
+         mixed=False, transfer="flip"):
     return dict(name=name, family=family, scheme=scheme, rho_b=rho_b, shape=shape, split=split,
-                smoothed=smoothed, mixed=mixed)
+                smoothed=smoothed, mixed=mixed, transfer=transfer)
 
 
 def configurations(quick=False):
@@ -109,6 +111,7 @@ def configurations(quick=False):
           for r in ((0.8,) if quick else (1.0, 0.8, 0.5))]
     c += [_cfg(f"MUSL {s}", "shape", shape=s)
           for s in (("cpgimp", "cpdi2") if quick else ("ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss"))]
+    c += [_cfg(f"MUSL {s} apic", "transfer", shape=s, transfer="apic") for s in ("mpm", "cpgimp")]
     c += [_cfg("MUSL mpm + split", "splitting", split=True)]
     c += [_cfg("MUSL mpm + smoothed", "stress feedback", smoothed=True)]
     c += [_cfg("MUSL mpm + mixed", "force integration", mixed=True)]
@@ -126,8 +129,8 @@ def family_options(cfgs):
 def applicable(problem, cfg):
     """None when the configuration runs on the problem, else the reason it does not."""
     if problem == "W1" and cfg["shape"] != "mpm":
-        return ("the W1 builder (fenicsmpm.problems.absorbing_column) takes no shape argument: "
-                "wide shapes were not run on W1")
+        return ("wide shapes were not run on W1 (a one-cell-wide 1D column; the reflection "
+                "is the boundary's)")
     return None
 
 
@@ -157,7 +160,8 @@ def _integrator(cfg, damped):
         if damped:     # damping set in build (large_deformation_column sets DampedExplicit's)
             return _damped_ga(cfg["rho_b"])
         return fm.ExplicitGeneralizedAlpha(cfg["rho_b"])
-    return DampedExplicit(cfg["scheme"]) if damped else fm.Explicit(cfg["scheme"])
+    kw = dict(transfer=cfg.get("transfer", "flip"))
+    return DampedExplicit(cfg["scheme"], **kw) if damped else fm.Explicit(cfg["scheme"], **kw)
 
 
 def build(problem, cfg, size, comm):
@@ -183,7 +187,7 @@ def build(problem, cfg, size, comm):
         from ..problems.elastic import colliding_discs
         part = vertex_ghost_partitioner() if cfg["shape"] != "mpm" else None
         sim0, ex = colliding_discs(integ, n_cells=int(size), cfl=DISCS_CFL, comm=comm,
-                                   partitioner=part)
+                                   partitioner=part, shape=cfg["shape"])
         sim = fm.Simulation(sim0.grid, sim0.particles, integ, dt=sim0.dt, shape=cfg["shape"],
                             stress_feedback="smoothed" if cfg["smoothed"] else None,
                             force_integration="mixed" if cfg["mixed"] else "particles")
@@ -192,7 +196,7 @@ def build(problem, cfg, size, comm):
     elif problem == "W1":
         from ..problems.absorbing_column import absorbing_column
         sim, ex = absorbing_column(integ, base="viscous", dx=float(size), cfl=0.5, comm=comm,
-                                   depths=(50.0, 100.0))
+                                   depths=(50.0, 100.0), shape=cfg["shape"])
         ex["h"] = float(size)
         steps = int(math.ceil(W1_T / sim.dt - 1e-9))
     else:
@@ -269,7 +273,7 @@ def run_one(problem, cfg, size, comm, sample_every=10):
     config = dict(problem=problem, technique=cfg["name"], family=cfg["family"],
                   integrator="ExplicitGeneralizedAlpha" if cfg["scheme"] == "GA" else "Explicit",
                   scheme=cfg["scheme"], rho_b=cfg["rho_b"], shape=cfg["shape"],
-                  splitting=cfg["split"], stress_feedback="smoothed" if cfg["smoothed"] else None,
+                  transfer=cfg["transfer"], splitting=cfg["split"], stress_feedback="smoothed" if cfg["smoothed"] else None,
                   force_integration="mixed" if cfg["mixed"] else "particles",
                   h=float(ex["h"] if isinstance(ex, dict) else ex.h), dt=float(sim.dt), ppc=4,
                   cell_type="quadrilateral", size=size, error_measure=ERROR_NAMES[problem])
@@ -445,7 +449,7 @@ def update_readme(doc, path):
 # ---------------------------------------------------------------------------- output
 COLORS = {"baseline": "k", "update order": "tab:blue", "shape": "tab:green",
           "splitting": "tab:red", "stress feedback": "tab:purple",
-          "force integration": "tab:orange"}
+          "force integration": "tab:orange", "transfer": "tab:brown"}
 
 
 def plot(doc, path, comm):

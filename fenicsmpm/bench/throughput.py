@@ -128,7 +128,7 @@ def build_scene(cfg, comm=None):
         integ = fm.Newmark(beta=cfg["beta"], gamma=cfg["gamma"], **kw)
         dt = cfg["dt_factor"] * grid.h / mat.p_wave_speed      # = dt_factor * sim.dt_critical
     sim = fm.Simulation(grid, pts, integ, dt=dt, gravity=cfg["gravity"],
-                        cfl=cfg.get("cfl", 0.5))
+                        cfl=cfg.get("cfl", 0.5), shape="mpm")
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
     cfg["h"], cfg["dt"], cfg["dt_critical"] = grid.h, sim.dt, sim.dt_critical
     return sim

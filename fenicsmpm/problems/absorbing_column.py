@@ -76,13 +76,14 @@ def gaussian_pulse(t):
 def absorbing_column(integrator, base="viscous", dx=0.5, height=100.0, width=None, per_cell=2,
                      dt=None, spring="deeks-randolph", r_b=None, angle=0.0, delta=None,
                      rollers=None, depths=DEPTHS, load=None, cfl=0.5, comm=MPI.COMM_WORLD,
-                     partitioner=None):
+                     partitioner=None, shape="auto"):
     """W1: the column described in the module docstring. Returns (sim, exact).
 
     dt: None -> "auto" (cfl * dx / c_p) for explicit integrators, 0.005 s (W1) for implicit
     ones; or a number. load: the surface pressure p(t) in Pa (default the W1 pulse).
     exact["probes"] maps each depth to its Probe. partitioner: an optional dolfinx cell
-    partitioner for the mesh (e.g. fm.partition.strips(1, ny, axis=1) for reproducible runs)."""
+    partitioner for the mesh (e.g. fm.partition.strips(1, ny, axis=1) for reproducible runs).
+    shape: the Simulation's shape family."""
     if width is None:
         width = dx
     for name, val in (("dx", dx), ("height", height), ("width", width)):
@@ -132,7 +133,7 @@ def absorbing_column(integrator, base="viscous", dx=0.5, height=100.0, width=Non
     cp, cs = mat.p_wave_speed, mat.s_wave_speed
     if dt is None:
         dt = "auto" if integrator.explicit else 0.005
-    sim = Simulation(grid, pts, integrator, dt=dt, cfl=cfl)
+    sim = Simulation(grid, pts, integrator, dt=dt, cfl=cfl, shape=shape)
     sim.add_traction(top_where, lambda t: -load(t) * axis)
     if rollers:
         sim.fix(sides_where, [0])

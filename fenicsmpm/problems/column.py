@@ -45,8 +45,8 @@ class DampedExplicit(Explicit):
     velocities are multiplied by exp(-damping dt). `damping` (1/s) may be set after
     construction (large_deformation_column sets it to 2 w1 when it is None)."""
 
-    def __init__(self, scheme="MUSL", flip=1.0, damping=None):
-        super().__init__(scheme, flip)
+    def __init__(self, scheme="MUSL", flip=None, damping=None, transfer=None):
+        super().__init__(scheme, flip, transfer)
         self.damping = damping
 
     def step(self, sim, dt):

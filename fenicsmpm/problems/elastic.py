@@ -22,13 +22,14 @@ def _partitioner(partitioner):
 
 def vibrating_bar(integrator, n_cells=20, per_cell=2, dt=None, cfl=0.2, length=1.0, E=100.0,
                   density=1.0, v0=0.1, cell_type=dmesh.CellType.quadrilateral,
-                  comm=MPI.COMM_WORLD, partitioner=None):
+                  comm=MPI.COMM_WORLD, partitioner=None, shape="auto"):
     """V1: axially vibrating bar, fixed at x = 0, free at x = L, v(x, 0) = v0 sin(pi x / 2L).
 
     Plane strain with nu = 0 and the transverse motion fixed, so the bar is 1D. The mesh
     extends two cells beyond the free end so the end stays inside the grid.
     Exact: v(x, t) = v0 cos(w t) sin(pi x / 2L), w = (pi / 2L) sqrt(E / rho).
-    dt defaults to cfl * h / c (explicit) or to 5 h / c (implicit)."""
+    dt defaults to cfl * h / c (explicit) or to 5 h / c (implicit); `shape`: the
+    Simulation's shape family."""
     h = length / n_cells
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [length + 2 * h, h]], [n_cells + 2, 1], cell_type,
                                  **_partitioner(partitioner))
@@ -40,7 +41,7 @@ def vibrating_bar(integrator, n_cells=20, per_cell=2, dt=None, cfl=0.2, length=1
     c = np.sqrt(E / density)
     if dt is None:
         dt = cfl * h / c if integrator.explicit else 5.0 * h / c
-    sim = Simulation(grid, pts, integrator, dt=dt)
+    sim = Simulation(grid, pts, integrator, dt=dt, shape=shape)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0), [0])
     sim.fix(lambda x: np.full(len(x), True), [1])
     omega = k * c
@@ -52,18 +53,18 @@ def vibrating_bar(integrator, n_cells=20, per_cell=2, dt=None, cfl=0.2, length=1
 
 def self_weight_column(integrator, n_cells=10, per_cell=2, height=10.0, E=1e8, nu=0.0,
                        density=2000.0, g=10.0, dt=1.0, cell_type=dmesh.CellType.quadrilateral,
-                       comm=MPI.COMM_WORLD):
+                       comm=MPI.COMM_WORLD, shape="auto"):
     """V2 (small strain): elastic column under self-weight, one cell wide, rollers on the sides
     and base. The mesh has one empty cell row above the column (inactive nodes).
 
     Exact (linear): sigma_yy(y) = -rho g (H - y), u_y(y) = -rho g (H y - y^2 / 2) / M,
-    so the top settles rho g H^2 / (2 M)."""
+    so the top settles rho g H^2 / (2 M). `shape`: the Simulation's shape family."""
     h = height / n_cells
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [h, height + h]], [1, n_cells + 1], cell_type)
     grid = Grid(msh)
     mat = LinearElastic(E=E, nu=nu, density=density)
     pts = Particles.fill(grid, mat, per_cell=per_cell, region=lambda x: x[:, 1] < height)
-    sim = Simulation(grid, pts, integrator, dt=dt, gravity=(0.0, -g))
+    sim = Simulation(grid, pts, integrator, dt=dt, gravity=(0.0, -g), shape=shape)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], h), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0), [1])
     M = mat.constrained_modulus
@@ -76,12 +77,14 @@ def self_weight_column(integrator, n_cells=10, per_cell=2, height=10.0, E=1e8, n
 
 
 def colliding_discs(integrator, n_cells=20, per_cell=2, cfl=0.5, speed=0.1,
-                    cell_type=dmesh.CellType.quadrilateral, comm=MPI.COMM_WORLD, partitioner=None):
+                    cell_type=dmesh.CellType.quadrilateral, comm=MPI.COMM_WORLD, partitioner=None,
+                    shape="auto"):
     """L2: two elastic discs (radius 0.2, centres (0.2, 0.2) and (0.8, 0.8)) moving towards each
     other with velocities +-(speed, speed) in a unit square; E = 1000, nu = 0.3, rho = 1000
     (Sulsky et al. 1995). No boundary conditions, no gravity: total momentum stays zero, and
     kinetic energy turns into strain energy during the impact (which starts at t ~ 1.59 s).
-    `partitioner` (a dolfinx cell partitioner) fixes where the mesh is cut across ranks."""
+    `partitioner` (a dolfinx cell partitioner) fixes where the mesh is cut across ranks.
+    `shape`: the Simulation's shape family (as in the other builders)."""
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells], cell_type,
                                  **_partitioner(partitioner))
     grid = Grid(msh)
@@ -95,7 +98,7 @@ def colliding_discs(integrator, n_cells=20, per_cell=2, cfl=0.5, speed=0.1,
     pts = (Particles.fill(grid, mat, per_cell=per_cell, region=disc(0), velocity=v)
            + Particles.fill(grid, mat, per_cell=per_cell, region=disc(1), velocity=-v))
     dt = cfl * grid.h / mat.p_wave_speed if integrator.explicit else 2.0 * grid.h / mat.p_wave_speed
-    sim = Simulation(grid, pts, integrator, dt=dt)
+    sim = Simulation(grid, pts, integrator, dt=dt, shape=shape)
     contact = (np.linalg.norm(centres[1] - centres[0]) - 0.4) / (2 * speed * np.sqrt(2))
     return sim, dict(contact_time=contact, kinetic_energy=0.5 * 1000.0 * np.pi * 0.2 ** 2 * 2 * 2 * speed ** 2)
 

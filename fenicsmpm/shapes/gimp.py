@@ -29,15 +29,17 @@ from ..kernels.axisymmetric import meridian_area
 
 
 @njit(cache=True)
-def _phi(s, L):
-    """Antiderivative of the hat max(0, 1 - |s|/L), zero at s = -L."""
-    if s <= -L:
-        return 0.0
-    if s <= 0.0:
-        return (L + s) * (L + s) / (2.0 * L)
-    if s <= L:
-        return L - (L - s) * (L - s) / (2.0 * L)
-    return L
+def _integral(a, b, L):
+    """int_a^b max(0, 1 - |s|/L) ds for a <= b: the parts below and above s = 0, each from
+    the antiderivative that vanishes at its end of the support ((L + s)^2 / 2L below, and
+    -(L - s)^2 / 2L above), so a box overlapping the support by delta << L gets delta^2 / 2L
+    and not a difference of two numbers near L (which rounds to 0 while the gradient does
+    not, and the weight gradients stop summing to zero)."""
+    lo, hi = max(a, -L), min(b, 0.0)
+    below = ((L + hi) * (L + hi) - (L + lo) * (L + lo)) / (2.0 * L) if hi > lo else 0.0
+    lo, hi = max(a, 0.0), min(b, L)
+    above = ((L - lo) * (L - lo) - (L - hi) * (L - hi)) / (2.0 * L) if hi > lo else 0.0
+    return below + above
 
 
 @njit(cache=True)
@@ -56,7 +58,7 @@ def weight_1d(xp, lp, xi_node, L, lo, hi):
     if b - xi_node <= -L * (1.0 - 1e-12) or a - xi_node >= L * (1.0 - 1e-12):
         return 0.0, 0.0
     w = b - a
-    S = (_phi(b - xi_node, L) - _phi(a - xi_node, L)) / w
+    S = _integral(a - xi_node, b - xi_node, L) / w
     dS = (_hat(b - xi_node, L) - _hat(a - xi_node, L)) / w
     return S, dS
 
