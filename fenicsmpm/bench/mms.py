@@ -6,8 +6,9 @@
 Unit square, neo-Hookean E = 1e7, nu = 0.3, rho0 = 1000, amplitude A = 0.05 (F11 between
 0.69 and 1.31), 2 x 2 particles per quadrilateral cell, run to the displacement peak
 t_end = 1 / (2 c). Series (integrator x shape family): explicit MUSL (dt = 0.2 h / c_p)
-with every shape family ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2"), and implicit Newmark
-(dt = h / c_p) with "mpm" (implicit runs support the standard shapes only). Cells per side
+with every shape family ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2"), the same on triangles
+(each square split in two) with the default shape="auto" (CPDI2 there) and "mpm", and
+implicit Newmark (dt = h / c_p) with "mpm". Cells per side
 n = 8, 16, 32, 64 (quick: 4, 6, 8, 12).
 
 Metrics per run: displacement_error and stress_error, the normalized L2 errors at the
@@ -118,7 +119,12 @@ def print_summary(doc, comm, case, metrics):
 
 # ---------------------------------------------------------------------------- the MMS case
 def series_list():
-    return [("Explicit", "MUSL", s) for s in SHAPES] + [("Newmark", "Newmark", "mpm")]
+    """(integrator, scheme, shape, cell type): every family on quadrilaterals, and on triangles
+    (the right-diagonal split of the same lattice) the default shape="auto" (CPDI2) and the
+    standard family."""
+    quads = [("Explicit", "MUSL", s, "quadrilateral") for s in SHAPES]
+    tris = [("Explicit", "MUSL", s, "triangle") for s in ("auto", "mpm")]
+    return quads + tris + [("Newmark", "Newmark", "mpm", "quadrilateral")]
 
 
 def _integrator(kind, scheme):
@@ -126,12 +132,13 @@ def _integrator(kind, scheme):
     return fm.Explicit(scheme) if kind == "Explicit" else fm.Newmark()
 
 
-def run_one(kind, scheme, shape, n_cells, comm):
+def run_one(kind, scheme, shape, cell, n_cells, comm):
+    from dolfinx.mesh import CellType
     from ..problems.mms import axis_aligned, errors
     integ = _integrator(kind, scheme)
     t0 = time.perf_counter()
     sim, ex = axis_aligned(integ, n_cells=n_cells, per_cell=PER_CELL, shape=shape, cfl=CFL,
-                           comm=comm)
+                           comm=comm, cell_type=getattr(CellType, cell))
     setup = common.gmax(comm, time.perf_counter() - t0)
     wall, _ = common.timed_run(sim, ex.steps)
     err = errors(sim, ex)
@@ -142,8 +149,10 @@ def run_one(kind, scheme, shape, n_cells, comm):
         m["newton_iterations_mean"] = float(np.mean(integ.iterations))
         integ.system.destroy()
     series = f"{kind}-{scheme} {shape}" if kind == "Explicit" else f"Newmark {shape}"
-    cfg = dict(problem="V3 MMS axis-aligned", integrator=kind, scheme=scheme, shape=shape,
-               h=ex.h, dt=ex.dt, ppc=PER_CELL ** 2, cell_type="quadrilateral", cells_along=n_cells,
+    if cell != "quadrilateral":
+        series += f" {cell}"
+    cfg = dict(problem="V3 MMS axis-aligned", integrator=kind, scheme=scheme, shape=sim.shape,
+               h=ex.h, dt=ex.dt, ppc=PER_CELL ** 2, cell_type=cell, cells_along=n_cells,
                A=ex.A, E=ex.E, nu=ex.nu, density=ex.rho, t_end=ex.t_end,
                dt_rule=f"{CFL:g} h / c_p" if integ.explicit else "h / c_p")
     rec = common.make_record(f"{series} n={n_cells}", cfg, n, common.gsum(comm, sim.grid.n_owned_cells),
