@@ -22,7 +22,7 @@ psi = 0), from a K0 state (fenicsmpm.materials.initial_stress.k0_stress below th
 surface). A 45 degree slope of this soil is not stable (its infinite-slope factor
 tan 20 / tan 45 = 0.36, plus 2 kPa of cohesion over 6 m of height), so it slides as soon
 as gravity acts. Explicit MUSL with dt="auto" (cfl 0.5 of the smallest cell), gravity in
-full from t = 0, default shape functions (shape="auto": CPDI2 on this triangle mesh). Supports: rollers on the sides (u_x = 0),
+full from t = 0, default shape functions ("mpm"). Supports: rollers on the sides (u_x = 0),
 the base fixed. The run lasts T_END = 1.5 s (--quick: 0.6 s).
 
 Printed and returned (same dict on every rank):

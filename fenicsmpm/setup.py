@@ -157,16 +157,12 @@ class SetupMixin:
         mesh facets where(x) selects (inclined and curved bases); boundaries.friction, seed 002
         §5.1: unilateral contact decided by the gap between the particles and the base, stick
         or slip. Explicit integrators (fm.Explicit, fm.ExplicitContact) only; do not also
-        `fix` the normal component there. With shape="auto" the run falls back to the
-        standard family (logged; measured on L3). Returns the boundary: its `reaction()`
-        (collective) is the force the material exerted on it in the last step."""
+        `fix` the normal component there. Returns the boundary: its `reaction()` (collective)
+        is the force the material exerted on it in the last step."""
         if not getattr(self.integrator, "supports_friction", False):
             raise NotImplementedError(f"add_friction: frictional boundaries need fm.Explicit or "
                                       f"fm.ExplicitContact, not {type(self.integrator).__name__}; "
                                       f"in implicit runs fix the base (sim.fix) instead")
-        if self.shape != "mpm" and self.shape_auto and self.step_count == 0:
-            self._use_standard_shape("rough bases: the L3 column collapse stops at 2.7 s with the "
-                                     "standard family, still creeps at 3.5 s with cpGIMP")
         fr = FrictionalBoundary(where, mu, normal).bind(self.grid)
         self.frictions.append(fr)
         return fr

@@ -11,11 +11,11 @@ from fenicsmpm.grid import vertex_ghost_partitioner
 comm = MPI.COMM_WORLD
 
 
-def _sim(cell_type, integrator, ring=True, **kw):
+def _sim(cell_type, integrator, ring=True, material=None, **kw):
     opts = dict(partitioner=vertex_ghost_partitioner()) if ring else {}
     msh = mesh.create_rectangle(comm, [[0, 0], [1, 1]], [8, 8], cell_type, **opts)
     grid = fm.Grid(msh)
-    p = fm.Particles.fill(grid, fm.LinearElastic(E=1e6, nu=0.3, density=1e3))
+    p = fm.Particles.fill(grid, material or fm.LinearElastic(E=1e6, nu=0.3, density=1e3))
     return fm.Simulation(grid, p, integrator, dt=1e-4, shape="auto", **kw)
 
 
@@ -35,6 +35,14 @@ def test_auto_falls_back_with_a_reason():
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit())
     sim.set_periodic(0)
     assert sim.shape == "mpm" and "periodic" in sim.shape_reason
+    for mat in (fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3),
+                fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)):
+        for cell in (mesh.CellType.quadrilateral, mesh.CellType.triangle):
+            sim = _sim(cell, fm.Explicit(), material=mat)
+            assert sim.shape == "mpm" and type(mat).__name__ in sim.shape_reason, sim.shape_reason
+    sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(),
+               material=fm.NeoHookean(E=1e6, nu=0.3, density=1e3))
+    assert sim.shape == "cpgimp"
 
 
 def test_unknown_shape_lists_the_choices():

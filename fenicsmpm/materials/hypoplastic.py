@@ -442,6 +442,8 @@ class Hypoplastic:
     all `stress` calls.
     """
 
+    plastic = True       # flows at the critical state (shapes.choose_shape)
+
     name = "Hypoplastic"
     n_state = 7
     state_columns = STATE_COLUMNS

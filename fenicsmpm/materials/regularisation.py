@@ -183,7 +183,10 @@ class NonlocalSoftening:
 
     nonlocal_length: None (local softening, the default) or the internal length l > 0;
     nonlocal_m: the over-nonlocal factor m >= 1 (module docstring).  With a length the
-    material has one more state column, `nonlocal_column`, holding kappa_bar."""
+    material has one more state column, `nonlocal_column`, holding kappa_bar.
+    `plastic` marks the material as flowing plastically (shapes.choose_shape)."""
+
+    plastic = True
 
     def _set_nonlocal(self, length, m, local_columns):
         owner = type(self).__name__

@@ -14,16 +14,24 @@ def choose_shape(sim):
     The most accurate family the mesh supports, by measurement (bench techniques, mms,
     column-peers; issue 15): cpGIMP on structured axis-aligned quadrilateral/hexahedral
     grids, CPDI2 on other 2D meshes (triangles, unstructured quadrilaterals). The standard
-    family where a wide one is not available: implicit integrators (the wide-stencil implicit
-    assembly is several times slower), force_integration="mixed", 3D unstructured meshes (no
-    tetrahedral CPDI yet). Under MPI a mesh without the vertex ghost layer gets it
-    (Grid.ensure_vertex_ring, called by the Simulation). Collective."""
+    family where a wide one is not available or measured worse: implicit integrators (the
+    wide-stencil implicit assembly is several times slower), force_integration="mixed",
+    plastic materials (`plastic` set: MohrCoulomb, VonMises, Hypoplastic; with cpGIMP the L4
+    slope's strength-reduction factor at failure was 0.65 against 0.39-0.44 with the standard
+    family and about 0.46 from the seed's phi > 35 deg threshold, the jacked pile's
+    resistance 50 kN against 24 kN and an estimate of 7 kN, and the L3 collapse did not stop),
+    3D unstructured meshes (no tetrahedral CPDI yet). Under MPI a mesh without the vertex
+    ghost layer gets it (Grid.ensure_vertex_ring, called by the Simulation). Collective."""
     from .gimp import lattice
     grid = sim.grid
     if not sim.integrator.explicit:
         return "mpm", "implicit integrator (the wide-stencil implicit assembly is several times slower)"
     if sim.force_integration != "particles":
         return "mpm", f"force_integration={sim.force_integration!r} needs the standard family"
+    plastic = sorted({type(m).__name__ for m in sim.particles.materials if getattr(m, "plastic", False)})
+    if plastic:
+        return "mpm", (f"plastic material ({', '.join(plastic)}): failure loads come out higher "
+                       f"with the wide families (L4 slope F_s 0.65 with cpGIMP, 0.39-0.44 standard)")
     try:
         lattice(grid)
         return "cpgimp", "structured axis-aligned grid"
