@@ -7,4 +7,5 @@ solution and error measures, shared by the tests, the demos and the benchmark su
     cylinder           thick cylinder (Lame, Hill) on axisymmetric grids
     absorbing_column   W1 pulse in a column on fixed/viscous/viscoelastic bases
     soil_column        P1 site response of a soil column
+    sudden_column      PEERS.md column under suddenly applied gravity (CB-Geo's benchmark)
 """
