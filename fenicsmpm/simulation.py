@@ -22,6 +22,7 @@ from .kernels import transfer as kt
 from .kernels.smoothing import smoothed_stress
 from .materials.regularisation import regularise
 from .setup import SetupMixin
+from .kernels.fbar import fbar
 from .shapes import choose_shape, resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
@@ -61,12 +62,15 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings).
     force_integration: "particles" (the internal force as a particle sum), or "mixed" (MPM
     with Gauss-point integration of the internal force, fenicsmpm.integrators.mixed_integration).
+    fbar: explicit integrators only: the incremental deformation gradient's volume change is
+    averaged over each cell (kernels.fbar, F-bar) against volumetric locking under isochoric
+    plastic flow (the Prandtl footing's limit pressure, problems.footing).
     Axisymmetric analysis is a property of the grid (fm.Grid(mesh, axisymmetric=True),
     fenicsmpm.kernels.axisymmetric): hoop terms are added to the strain, force and tangent, and the
     radial displacement of nodes on the axis r = 0 is fixed."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-12, on_leave="error", max_dt_cuts=0, shape="auto",
+                 mass_tolerance=1e-12, on_leave="error", max_dt_cuts=0, shape="auto", fbar=False,
                  stress_feedback=None, gravity_ramp=None, force_integration="particles"):
         self.grid = grid
         self.particles = particles
@@ -116,6 +120,12 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.axisymmetric = grid.axisymmetric
         self._field = np.zeros(0, dtype=np.int32)
         self._check_options(on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp, force_integration)
+        if fbar not in (True, False):
+            raise ValueError(f"Simulation: 'fbar' must be True or False, got {fbar!r}")
+        if fbar and not integrator.explicit:
+            raise NotImplementedError("Simulation: fbar=True needs an explicit integrator (the "
+                                      "implicit tangent of F-bar is not implemented)")
+        self.fbar = bool(fbar)
         self.removed_mass = 0.0
         self.removed_count = 0
         self.base_motion = None                      # boundaries.base_motion.RigidBase (relative frame)
@@ -329,6 +339,16 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         kt.incremental_F(self.grid.D, self.nodes, self.dN, w, scale, out)
         if self.axisymmetric:
             axi.hoop_strain(self.nodes, self.N, self._field, _NOT_RIGID, w[:, None, :], scale, self._r, out)
+        if self.fbar:
+            self.average_volume_change(out)
+
+    def average_volume_change(self, dF, body=None, n_bodies=1):
+        """F-bar (kernels.fbar): dF's volume change averaged over the particles of each cell,
+        per body when `body` (the particles' body ids, n_bodies of them) is given."""
+        p = self.particles
+        group = p.cell if body is None else p.cell.astype(np.int64) * n_bodies + body
+        fbar(group, p.V, dF, self.grid.n_cells * n_bodies,
+             3 if self.gdim == 3 or self.axisymmetric else 2)
 
     def internal_force(self, stress, out, volume=None):
         """out += -sum_p V_p stress_p . grad N_ip (no body force)."""

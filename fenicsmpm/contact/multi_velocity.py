@@ -719,6 +719,8 @@ class ExplicitContact:
         incremental_F_bodies(sim.grid.D, sim.nodes, sim.dN, body, self._is_rigid, v_b, dt, dF)
         if sim.axisymmetric:
             axi.hoop_strain(sim.nodes, sim.N, body, self._is_rigid, v_b, dt, sim._r, dF)
+        if sim.fbar:
+            sim.average_volume_change(dF, body, self.nb)
         sim.timers["constitutive"] += time.perf_counter() - t0
         sim.trial_stress(dF)
         sim.commit(dF)

@@ -8,4 +8,8 @@ solution and error measures, shared by the tests, the demos and the benchmark su
     absorbing_column   W1 pulse in a column on fixed/viscous/viscoelastic bases
     soil_column        P1 site response of a soil column
     sudden_column      PEERS.md column under suddenly applied gravity (CB-Geo's benchmark)
+    friction           blocks on rough bases and rigid inclines
+    rotating_disc      a rigidly spinning elastic disc (angular momentum)
+    localisation       softening shear layer and strip footing (regularisation)
+    footing            Prandtl's smooth strip footing on Tresca soil (F-bar)
 """

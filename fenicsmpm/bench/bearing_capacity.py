@@ -1,0 +1,78 @@
+"""Benchmark case `bearing-capacity`: Prandtl's smooth strip footing with and without F-bar
+(issue 21; fenicsmpm.problems.footing, kernels.fbar).
+
+    python -m fenicsmpm.bench bearing-capacity [--quick] [--out DIR]
+
+Rows fbar-on/off at cell sizes h = 0.25, 0.1 m (quick: 0.25 only): the footing pressure
+q / (2 + pi) c_u sampled every 0.1 s of the push (settlement = problems.footing's
+settlement(t)) to t_end = 0.8 s (about 38 mm). Metrics: plateau = the mean of q over
+settlements from 14 mm on (t >= 0.5 s), its spread (max - min there) and the error of the
+plateau against Prandtl's (2 + pi) c_u. Writes out/bearing-capacity.json and
+out/bearing-capacity.png (pressure against settlement, one curve per row)."""
+import os
+import time
+
+import numpy as np
+
+from . import common
+
+CASE = "bearing-capacity"
+T_END = 0.8
+PLATEAU_FROM = 0.5
+
+
+def _row(h, use_fbar, comm):
+    from ..problems.footing import strip_footing
+    sim, q, settlement = strip_footing(h=h, fbar=use_fbar, comm=comm)
+    t0 = time.perf_counter()
+    t, d, qs = [], [], []
+    for k in range(int(round(T_END / 0.1))):
+        sim.run(t_end=0.1 * (k + 1))
+        t.append(sim.t)
+        d.append(settlement(sim.t))
+        qs.append(float(q()))
+    wall = common.gmax(comm, time.perf_counter() - t0)
+    late = np.array(t) >= PLATEAU_FROM - 1e-9
+    plateau = float(np.mean(np.array(qs)[late]))
+    m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=float(np.ptp(np.array(qs)[late])))
+    cfg = dict(integrator="ExplicitContact", scheme="MUSL", shape=sim.shape, fbar=use_fbar,
+               h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral", nu=0.49,
+               cells_under_half_width=0.5 / h)
+    rec = common.make_record(f"h{h:g}-fbar-{'on' if use_fbar else 'off'}", cfg,
+                             sim.particles.n_global(), common.global_cells(sim),
+                             sim.step_count, wall, m)
+    rec["curve"] = dict(settlement_mm=[1e3 * x for x in d], pressure=qs)
+    return rec
+
+
+def run(quick=False, out="bench-results", comm=None, verbose=True):
+    comm = common.world(comm)
+    say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
+    runs = []
+    for h in ((0.25,) if quick else (0.25, 0.1)):
+        for use_fbar in (True, False):
+            r = _row(h, use_fbar, comm)
+            runs.append(r)
+            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} (2 + pi) c_u, spread "
+                f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
+    doc = common.result(CASE, runs, comm, quick=quick, targets=dict(plateau_error=0.03))
+    common.write_result(doc, out, comm)
+    common.print_table([dict(name=r["name"], particles=r["n_particles"], wall=r["wall_s"],
+                             **{k: r["metrics"][k] for k in ("plateau", "plateau_error", "spread")})
+                        for r in runs],
+                       [("run", "name"), ("particles", "particles"), ("q / (2+pi) c_u", "plateau"),
+                        ("error", "plateau_error"), ("spread", "spread"), ("wall s", "wall")],
+                       comm=comm, title=common.table_title(doc))
+    fig, axes = common.new_figure(size=(6.0, 4.2))
+    ax = axes[0][0]
+    if comm.rank == 0:
+        for r in runs:
+            ax.plot(r["curve"]["settlement_mm"], r["curve"]["pressure"], "o-", ms=3,
+                    label=r["name"])
+        ax.axhline(1.0, color="k", ls="--", lw=0.8, label="Prandtl (2 + pi) c_u")
+        ax.set_xlabel("settlement [mm]")
+        ax.set_ylabel("q / (2 + pi) c_u")
+        ax.legend(fontsize=7)
+    common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,
+                       title=common.figure_title(doc, "Prandtl strip footing"))
+    return doc

@@ -1,0 +1,57 @@
+"""Prandtl's smooth rigid strip footing on weightless Tresca soil (issue 21; seed 000 ch. 5,
+BENCHMARKS W5's collapse-load check): the limit pressure is (2 + pi) c_u (Prandtl 1920).
+
+Half model (symmetry line x = 0): soil `width` x `depth` (default 5 m x 3 m) of
+fm.VonMises(E = 10 MPa, nu, rho = 1800, c_u = 10 kPa) without weight; a rigid footing of
+half-width B/2 = 0.5 m and height 2 h (a body of particles, fm.ExplicitContact with
+`rigid={1: v(t)}`, frictionless contact mu = 0: a smooth footing) stands on the surface and is
+pushed down at `speed_factor` c_s, reached smoothly (3 s^2 - 2 s^3) over the time of a
+quarter cell. Rollers on x = 0 and x = width, the base fixed; the mesh has 3 cell rows above
+the surface. The footing pressure is q = F_y / (B/2), F the contact force on the footing
+(integrator.body_contact_force)."""
+import numpy as np
+
+B2 = 0.5          # footing half-width [m]
+C_U = 10e3        # undrained strength [Pa]
+PRANDTL = 2.0 + np.pi
+
+
+def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
+                  shape="auto", fbar=None, comm=None):
+    """The scene: (sim, pressure, settlement), pressure() -> q / ((2 + pi) c_u) of the last
+    step and settlement(t) the footing's prescribed settlement [m] (both collective-free
+    for settlement, collective for pressure). fbar: the Simulation option (None: the
+    library default)."""
+    from dolfinx import mesh
+    from mpi4py import MPI
+    import fenicsmpm as fm
+    comm = MPI.COMM_WORLD if comm is None else comm
+    nx, ny = int(round(width / h)), int(round(depth / h)) + 3
+    msh = mesh.create_rectangle(comm, [[0.0, 0.0], [width, ny * h]], [nx, ny],
+                                mesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    soil = fm.VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U)
+    pts = fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < depth)
+    pts = pts + fm.Particles.fill(grid, fm.LinearElastic(E=10e6, nu=0.3, density=1800.0),
+                                  per_cell=2, region=lambda x: (x[:, 0] < B2) & (x[:, 1] > depth)
+                                  & (x[:, 1] < depth + 2 * h))
+    speed = speed_factor * np.sqrt(soil.G / 1800.0)
+    ramp = 0.25 * h / speed
+
+    def velocity(t):
+        s = min(t / ramp, 1.0)
+        return (0.0, -speed * (3 * s * s - 2 * s ** 3))
+
+    def settlement(t):
+        s = min(t / ramp, 1.0)
+        return speed * (ramp * (s ** 3 - 0.5 * s ** 4) + max(t - ramp, 0.0))
+
+    kw = {} if fbar is None else dict(fbar=fbar)
+    integ = fm.ExplicitContact(scheme, mu=0.0, rigid={1: velocity})
+    sim = fm.Simulation(grid, pts, integ, dt="auto", shape=shape, **kw)
+    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], width), [0])
+    sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
+
+    def pressure():
+        return np.asarray(integ.body_contact_force)[1][1] / B2 / (PRANDTL * C_U)
+    return sim, pressure, settlement
