@@ -1,0 +1,112 @@
+"""Threaded particle passes: the particles are cut into contiguous chunks [lo, hi) and a
+numba `prange` runs the chunks on numba's threads.
+
+The thread count is numba's: NUMBA_NUM_THREADS (default: every core), or
+numba.set_num_threads. Under MPI without NUMBA_NUM_THREADS, `default_threads` gives each
+rank its share of the cores on its node (called when this module is imported), so
+`mpirun -n <cores>` runs one thread per rank.
+
+Passes that write per particle only (G2P, dF, commit, shape functions) use
+particle_chunks(n) chunks, which does not depend on the thread count: the same bits on
+any number of threads.
+Passes that add into grid nodes (P2G) use one chunk per thread (n_chunks). Chunk 0 adds
+straight into the output, every other chunk c into its own nodal array, zeroed over the
+node indices its particles touch (node_range; for particles stored in fill order about
+1/nc of the grid); these are added into the output afterwards, in chunk order, in
+parallel over the nodes (add_chunks1/2):
+    out_i += sum_p in chunk 0 (...) ;   out_i += sum_{c >= 1} buf_c,i.
+No two threads write the same memory. The sums differ from the serial pass by round-off
+only (the order of the particle sums depends on the number of chunks). A pass with fewer
+than 2 MIN_CHUNK particles runs its serial loop directly: no thread start-up, and the
+exact serial result."""
+import os
+
+import numba
+from numba import get_num_threads, njit, prange, set_num_threads
+from numba.core.cpu_options import ParallelOptions
+
+# numba's parallel transform for the explicit prange loops only (njit(parallel=PRANGE)):
+# no implicit parfors from array expressions, half the compile time of parallel=True
+PRANGE = ParallelOptions(dict(prange=True, comprehension=False, reduction=False,
+                              inplace_binop=False, setitem=False, numpy=False, stencil=False,
+                              fusion=False))
+
+MIN_CHUNK = 2048        # particles; below 2 MIN_CHUNK a pass runs serially
+MAX_CHUNKS = 256        # chunks of a per-particle pass (numba spreads them over the threads)
+
+
+def n_chunks(n):
+    """Chunks of an n-particle pass: one per thread, none below MIN_CHUNK particles, >= 1.
+    (Plain Python: numba cannot cache a kernel that asks for the thread count itself, so
+    each threaded kernel takes the chunk count from a thin Python function.)"""
+    return max(1, min(get_num_threads(), n // MIN_CHUNK))
+
+
+@njit(cache=True)
+def particle_chunks(n):
+    """Chunks of an n-particle pass that writes per particle only: n // MIN_CHUNK, at most
+    MAX_CHUNKS, >= 1. It does not depend on the thread count (nor does the result)."""
+    return max(1, min(MAX_CHUNKS, n // MIN_CHUNK))
+
+
+@njit(cache=True)
+def chunk(n, nc, c):
+    """Particle range [lo, hi) of chunk c of nc (contiguous, sizes differ by at most 1)."""
+    return (n * c) // nc, (n * (c + 1)) // nc
+
+
+@njit(cache=True)
+def node_range(nodes, lo, hi, rng):
+    """rng[:] = [a, b): the range of node indices the particles lo..hi-1 touch."""
+    a, b = 1 << 62, -1
+    for p in range(lo, hi):
+        for k in range(nodes.shape[1]):
+            a = min(a, nodes[p, k])
+            b = max(b, nodes[p, k])
+    rng[0], rng[1] = a, b + 1
+    return a, b + 1
+
+
+@njit(parallel=PRANGE, cache=True)
+def add_chunks1(out, buf, rng):
+    """out_i += sum_c buf[c - 1, i] over the chunks c >= 1 whose node range rng[c] holds i
+    (their partial nodal sums, added in chunk order)."""
+    for i in prange(out.shape[0]):
+        for c in range(1, rng.shape[0]):
+            if rng[c, 0] <= i and i < rng[c, 1]:
+                out[i] += buf[c - 1, i]
+
+
+@njit(parallel=PRANGE, cache=True)
+def add_chunks2(out, buf, rng):
+    """out_ik += sum_c buf[c - 1, i, k], as add_chunks1 for nodal vectors."""
+    for i in prange(out.shape[0]):
+        for c in range(1, rng.shape[0]):
+            if rng[c, 0] <= i and i < rng[c, 1]:
+                for k in range(out.shape[1]):
+                    out[i, k] += buf[c - 1, i, k]
+
+
+def _local_ranks():
+    """Ranks of this MPI launch on this node, from the launcher's environment (1 if unknown)."""
+    for k in ("OMPI_COMM_WORLD_LOCAL_SIZE", "MPI_LOCALNRANKS", "MV2_COMM_WORLD_LOCAL_SIZE",
+              "PMI_LOCAL_SIZE", "SLURM_NTASKS_PER_NODE"):
+        try:
+            return max(1, int(os.environ[k]))
+        except (KeyError, ValueError):
+            pass
+    return 1
+
+
+def default_threads():
+    """Set numba's thread count for this process when NUMBA_NUM_THREADS is not set: the
+    cores numba sees divided among the MPI ranks on this node (at least 1). Returns the
+    thread count in effect."""
+    if "NUMBA_NUM_THREADS" not in os.environ:
+        local = _local_ranks()
+        if local > 1:
+            set_num_threads(max(1, numba.config.NUMBA_NUM_THREADS // local))
+    return get_num_threads()
+
+
+default_threads()
