@@ -12,6 +12,7 @@ from mpi4py import MPI
 from fenicsmpm import bench
 from fenicsmpm.bench import mpi_scaling, throughput
 from fenicsmpm.bench.__main__ import main
+from fenicsmpm.kernels.threads import MIN_CHUNK
 
 comm = MPI.COMM_WORLD
 serial_only = pytest.mark.skipif(comm.size > 1, reason="launches its own processes")
@@ -69,13 +70,13 @@ def test_weak_scaling_tiny(tmp_path):
 @serial_only
 def test_throughput_thread_rows():
     """One child per thread count runs the explicit scene with each shape family."""
-    th = throughput.run_threads(quick=True, scale=0.1, threads=(1, 2), verbose=False)
+    th = throughput.run_threads(quick=True, scale=0.2, threads=(1, 2), verbose=False)
     rows = {(r["scene"], r["threads"]): r for r in th["runs"]}
     assert set(rows) == {(f"explicit-MUSL-{s}", n) for s in throughput.THREAD_SHAPES for n in (1, 2)}
     for (scene, n), r in rows.items():
         assert r["config"]["threads"] == n
         assert r["config"]["shape_family"] == scene.rsplit("-", 1)[1]
-        assert r["n_particles"] > 2 * 4096                 # large enough to be cut into chunks
+        assert r["n_particles"] >= 2 * MIN_CHUNK            # large enough to be cut into chunks
         m = r["metrics"]
         assert m["particle_updates_per_s"] > 0
         assert abs(m["speedup_over_1_thread"] - th["speedup"][scene][str(n)]) < 1e-12

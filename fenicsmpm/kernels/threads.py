@@ -31,7 +31,8 @@ PRANGE = ParallelOptions(dict(prange=True, comprehension=False, reduction=False,
                               inplace_binop=False, setitem=False, numpy=False, stencil=False,
                               fusion=False))
 
-MIN_CHUNK = 2048        # particles; below 2 MIN_CHUNK a pass runs serially
+MIN_CHUNK = 8192        # particles; below 2 MIN_CHUNK a pass runs serially (a thread
+                        # start-up costs ~0.01-1 ms: worth it for passes of >~ 1 ms)
 MAX_CHUNKS = 256        # chunks of a per-particle pass (numba spreads them over the threads)
 
 
