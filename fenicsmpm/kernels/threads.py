@@ -11,8 +11,8 @@ stress, the guards' scan) use
 particle_chunks(n) chunks, which does not depend on the thread count: the same bits on
 any number of threads.
 Passes that add into grid nodes (P2G) use one chunk per thread (n_chunks). Chunk 0 adds
-straight into the output, every other chunk c into its own nodal array, zeroed over the
-node indices its particles touch (node_range; for particles stored in fill order about
+straight into the output, every other chunk c into its own nodal array (kept between
+calls: `scratch`), zeroed over the node indices its particles touch (node_range; for particles stored in fill order about
 1/nc of the grid); these are added into the output afterwards, in chunk order, in
 parallel over the nodes (add_chunks1/2):
     out_i += sum_p in chunk 0 (...) ;   out_i += sum_{c >= 1} buf_c,i.
@@ -21,8 +21,10 @@ only (the order of the particle sums depends on the number of chunks). A pass wi
 than 2 MIN_CHUNK particles runs its serial loop directly: no thread start-up, and the
 exact serial result."""
 import os
+import threading
 
 import numba
+import numpy as np
 from numba import get_num_threads, njit, prange, set_num_threads
 from numba.core.cpu_options import ParallelOptions
 
@@ -90,6 +92,22 @@ def add_chunks2(out, buf, rng):
             if rng[c, 0] <= i and i < rng[c, 1]:
                 for k in range(out.shape[1]):
                     out[i, k] += buf[c - 1, i, k]
+
+
+_SCRATCH = threading.local()
+
+
+def scratch(slot, k, like):
+    """A float64 work array of shape (k,) + like.shape (contents undefined) for the per-chunk
+    nodal sums of P2G, kept between calls in slot `slot` of this Python thread: a fresh
+    multi-MB array per call would fault its pages in again every time."""
+    pool = _SCRATCH.__dict__.setdefault("pool", {})
+    shape = (max(k, 0),) + like.shape
+    size = int(np.prod(shape))
+    buf = pool.get(slot)
+    if buf is None or buf.size < size:
+        buf = pool[slot] = np.empty(size)
+    return buf[:size].reshape(shape)
 
 
 def _local_ranks():

@@ -17,7 +17,7 @@ from numba import njit, prange
 
 from ..materials.piola import det3, work_increment
 from .threads import (PRANGE, add_chunks1, add_chunks2, chunk, n_chunks, node_range,
-                      particle_chunks)
+                      particle_chunks, scratch)
 
 
 # ---------------------------------------------------------------------- P2G
@@ -30,15 +30,16 @@ def _mass(nodes, N, mass, lo, hi, m_out):
 
 def p2g_mass(nodes, N, mass, m_out):
     """m_i += sum_p N_ip m_p."""
-    _p2g_mass_chunks(n_chunks(len(nodes)), nodes, N, mass, m_out)
+    nc = n_chunks(len(nodes))
+    _p2g_mass_chunks(nc, nodes, N, mass, m_out, scratch(0, nc - 1, m_out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_mass_chunks(nc, nodes, N, mass, m_out):
+def _p2g_mass_chunks(nc, nodes, N, mass, m_out, mb):
     n = nodes.shape[0]
     if nc == 1:
         return _mass(nodes, N, mass, 0, n, m_out)
-    mb, rng = np.empty((nc - 1, m_out.shape[0])), np.zeros((nc, 2), dtype=np.int64)
+    rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
@@ -65,16 +66,17 @@ def _mass_momentum(D, nodes, N, mass, v, lo, hi, m_out, mv_out):
 
 def p2g_mass_momentum(D, nodes, N, mass, v, m_out, mv_out):
     """m_i += sum_p N_ip m_p and (m v)_i += sum_p N_ip m_p v_p in one pass."""
-    _p2g_mass_momentum_chunks(n_chunks(len(nodes)), D, nodes, N, mass, v, m_out, mv_out)
+    nc = n_chunks(len(nodes))
+    _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, scratch(0, nc - 1, m_out),
+                              scratch(1, nc - 1, mv_out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out):
+def _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, mb, mvb):
     n = nodes.shape[0]
     if nc == 1:
         return _mass_momentum(D, nodes, N, mass, v, 0, n, m_out, mv_out)
-    mb, rng = np.empty((nc - 1, m_out.shape[0])), np.zeros((nc, 2), dtype=np.int64)
-    mvb = np.empty((nc - 1, mv_out.shape[0], mv_out.shape[1]))
+    rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
@@ -101,15 +103,16 @@ def _weighted(D, nodes, N, mass, q, lo, hi, out):
 
 def p2g_weighted(D, nodes, N, mass, q, out):
     """out_i += sum_p N_ip m_p q_p (momentum for q = v, mass-weighted acceleration for q = a)."""
-    _p2g_weighted_chunks(n_chunks(len(nodes)), D, nodes, N, mass, q, out)
+    nc = n_chunks(len(nodes))
+    _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, scratch(0, nc - 1, out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out):
+def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, buf):
     n = nodes.shape[0]
     if nc == 1:
         return _weighted(D, nodes, N, mass, q, 0, n, out)
-    buf, rng = np.empty((nc - 1, out.shape[0], out.shape[1])), np.zeros((nc, 2), dtype=np.int64)
+    rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
@@ -139,15 +142,16 @@ def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
 
     `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
     the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
-    _p2g_force_chunks(n_chunks(len(nodes)), D, nodes, N, dN, mass, V, stress, g, out)
+    nc = n_chunks(len(nodes))
+    _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, scratch(0, nc - 1, out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out):
+def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
     n = nodes.shape[0]
     if nc == 1:
         return _force(D, nodes, N, dN, mass, V, stress, g, 0, n, out)
-    buf, rng = np.empty((nc - 1, out.shape[0], out.shape[1])), np.zeros((nc, 2), dtype=np.int64)
+    rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
@@ -181,16 +185,18 @@ def p2g_affine(D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out):
         (m v)_i += sum_p N_ip m_p (v_p + C_p (x_i - x_p)),   m_i += sum_p N_ip m_p (with_mass).
     With C_p the velocity gradient of the last G2P (g2p_affine) an affine velocity field is
     carried to the nodes exactly (partition of unity and linear reproduction)."""
-    _p2g_affine_chunks(n_chunks(len(nodes)), D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out)
+    nc = n_chunks(len(nodes))
+    _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out,
+                       scratch(0, nc - 1, m_out), scratch(1, nc - 1, mv_out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out):
+def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out, mb,
+                       mvb):
     n = nodes.shape[0]
     if nc == 1:
         return _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, 0, n, m_out, mv_out)
-    mb, rng = np.empty((nc - 1, m_out.shape[0])), np.zeros((nc, 2), dtype=np.int64)
-    mvb = np.empty((nc - 1, mv_out.shape[0], mv_out.shape[1]))
+    rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
