@@ -133,10 +133,15 @@ def test_mpi_ranks_share_the_cores(monkeypatch):
     try:
         monkeypatch.delenv("NUMBA_NUM_THREADS", raising=False)
         monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "2")
-        assert th.default_threads() == max(1, numba.config.NUMBA_NUM_THREADS // 2)
-        monkeypatch.setenv("NUMBA_NUM_THREADS", str(numba.config.NUMBA_NUM_THREADS))
+        share = max(1, numba.config.NUMBA_NUM_THREADS // 2)
+        assert th.default_threads() == share == numba.get_num_threads()
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
-        assert th.default_threads() == numba.config.NUMBA_NUM_THREADS   # the user's choice
+        monkeypatch.setenv("NUMBA_NUM_THREADS", str(numba.config.NUMBA_NUM_THREADS))
+        assert th.default_threads() is None                     # the user's choice stands
+        monkeypatch.delenv("NUMBA_NUM_THREADS")
+        monkeypatch.setenv("OMPI_COMM_WORLD_LOCAL_SIZE", "1")
+        assert th.default_threads() is None                     # one rank: numba's default
+        assert numba.get_num_threads() == numba.config.NUMBA_NUM_THREADS
     finally:
         numba.set_num_threads(before)
 

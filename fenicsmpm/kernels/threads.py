@@ -122,14 +122,18 @@ def _local_ranks():
 
 
 def default_threads():
-    """Set numba's thread count for this process when NUMBA_NUM_THREADS is not set: the
-    cores numba sees divided among the MPI ranks on this node (at least 1). Returns the
-    thread count in effect."""
-    if "NUMBA_NUM_THREADS" not in os.environ:
-        local = _local_ranks()
-        if local > 1:
-            set_num_threads(max(1, numba.config.NUMBA_NUM_THREADS // local))
-    return get_num_threads()
+    """Under MPI (several ranks on this node) without NUMBA_NUM_THREADS, set numba's thread
+    count to the cores numba sees divided among those ranks (at least 1) and return it;
+    otherwise leave numba's default alone and return None (without starting numba's
+    thread pool: that happens at the first threaded pass)."""
+    if "NUMBA_NUM_THREADS" in os.environ:
+        return None
+    local = _local_ranks()
+    if local == 1:
+        return None
+    n = max(1, numba.config.NUMBA_NUM_THREADS // local)
+    set_num_threads(n)
+    return n
 
 
 default_threads()
