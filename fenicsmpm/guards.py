@@ -6,9 +6,10 @@ and the first offending particles (ids and positions), on every rank at once."""
 import warnings
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from .errors import ParticlesLeftMesh
+from .kernels.threads import PRANGE, chunk, particle_chunks
 from .materials.piola import det3
 
 
@@ -16,13 +17,10 @@ FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
 
 
 @njit(cache=True)
-def _scan(x, v, stress, F, V, V0, inverted, vol_tol, bad_out):
-    """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0, or an
-    increment the commit refused: `inverted`), 6 (volume below vol_tol V0). An inversion is
-    reported first: it is the cause of any non-finite value that follows it."""
+def _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, lo, hi):
     n_bad = 0
     d = x.shape[1]
-    for p in range(x.shape[0]):
+    for p in range(lo, hi):
         code = 5 if p < inverted.shape[0] and inverted[p] == 1 else 0
         for k in range(d if code == 0 else 0):
             if not np.isfinite(x[p, k]):
@@ -45,6 +43,23 @@ def _scan(x, v, stress, F, V, V0, inverted, vol_tol, bad_out):
         if code:
             n_bad += 1
     return n_bad
+
+
+@njit(parallel=PRANGE, cache=True)
+def _scan(x, v, stress, F, V, V0, inverted, vol_tol, bad_out):
+    """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0, or an
+    increment the commit refused: `inverted`), 6 (volume below vol_tol V0). An inversion is
+    reported first: it is the cause of any non-finite value that follows it. Returns the
+    number of bad particles (threaded over particle chunks, kernels.threads)."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, 0, n)
+    bad = np.zeros(nc, dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        bad[c] = _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, lo, hi)
+    return bad.sum()
 
 
 def check_particles(sim, vol_tol=1e-6):

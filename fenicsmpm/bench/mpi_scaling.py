@@ -1,6 +1,13 @@
-"""Benchmark case `mpi-scaling`: the same scenes on 1 and 2 MPI ranks (issue 4).
+"""Benchmark case `mpi-scaling`: the same scenes on 1, 2, ... MPI ranks (issues 4, 16).
 
-    python -m fenicsmpm.bench mpi-scaling [--quick]
+    python -m fenicsmpm.bench mpi-scaling [--quick] [--ranks 1,2,4,8,16] [--weak]
+
+--ranks: the rank counts to launch (must include 1; default 1,2). Strong scaling (default):
+the same scene on every rank count. --weak: weak scaling, the particles per rank fixed:
+on N ranks the scene has about N times the particles.
+Each rank runs one numba thread (NUMBA_NUM_THREADS=1 unless set in the environment), so
+the rank counts are compared at one core per rank.
+--weak grows the grid so that the block has N times the 1-rank block's cells (weak_scenes).
 
 The runner process is serial. For each rank count it launches
     mpirun [--allow-run-as-root] -n N python -m fenicsmpm.bench.mpi_scaling --worker SPEC RESULT
@@ -23,7 +30,11 @@ so that a burst of other load on a shared machine does not hit one rank count on
 (wall_per_step_repeats_s) and their median (wall_per_step_median_s).
 
 Metrics per run (times per step; stage times are averages over ranks, wall the slowest
-rank): wall_per_step_s, speedup = t(1 rank) / t(N ranks), efficiency = speedup / N,
+rank): wall_per_step_s; with P particles and t seconds per step on N ranks,
+efficiency = (P_N / (N t_N)) / (P_1 / t_1) (particle updates per second per rank against
+one rank: t_1 / (N t_N) for strong scaling, t_1 / t_N for weak), speedup = N efficiency,
+and efficiency_<stage> the same for each stage's time (exclusive, see below; "other"
+included; a stage that takes no time on N ranks has none),
 t_<stage> and frac_<stage> (of the wall time) for the simulation's stages with two parts
 taken out and reported on their own:
   migration: Particles.send_to_owners (called from Simulation.locate_and_shape; taken out
@@ -44,7 +55,7 @@ launch, the 1-minute load average and the fraction of the cores busy during one 
 busy), and other_load_cores: the cores used by other processes during the measured steps
 (all busy cores from /proc/stat minus the run's own CPU time over its wall time).
 
-Targets (issue 4, reported, not asserted): explicit speed-up >= 1.6 on 2 ranks."""
+Targets (issue 4, reported, not asserted): explicit speed-up >= 1.6 on 2 ranks (strong)."""
 import argparse
 import collections
 import functools
@@ -66,6 +77,9 @@ from . import common
 
 CASE = "mpi-scaling"
 RANKS = (1, 2)
+# the stages whose efficiency is reported (exclusive times, see the module docstring)
+EFF_STAGES = ("locate", "migration", "shape", "p2g", "exchange", "solve", "g2p",
+              "constitutive", "guards", "other")
 TARGETS = {"explicit_speedup_2_ranks": 1.6}
 
 MUMPS = {"ksp_type": "preonly", "pc_type": "lu", "pc_factor_mat_solver_type": "mumps"}
@@ -89,7 +103,7 @@ QUICK = [
 BAR_STAGES = ("locate", "migration", "shape", "p2g", "exchange", "solve (residual)",
               "assembly", "ksp", "g2p", "constitutive", "guards", "other")
 
-REFUSAL = (f"benchmark case {CASE!r} launches its own mpirun (1 and 2 ranks) and must be "
+REFUSAL = (f"benchmark case {CASE!r} launches its own mpirun (1, 2, ... ranks) and must be "
            f"started serially: python -m fenicsmpm.bench {CASE}")
 
 
@@ -112,6 +126,21 @@ def scenes(quick=False, scale=1.0, steps=None, repeats=None):
         if repeats is not None:
             s["repeats"] = repeats
         out.append(s)
+    return out
+
+
+def weak_scenes(specs, n):
+    """The scenes of `specs` (1 rank) grown for n ranks at fixed particles per rank: cells
+    per side c such that the block, (c - 2 MARGIN) x (c - MARGIN) cells, has about n times
+    the 1-rank block's cells."""
+    from .throughput import MARGIN
+    out = []
+    for s in specs:
+        c1 = s["cells"]
+        block = n * (c1 - 2 * MARGIN) * (c1 - MARGIN)
+        # (c - 2M)(c - M) = (c - 1.5 M)^2 - (M / 2)^2
+        c = int(round(1.5 * MARGIN + math.sqrt(block + 0.25 * MARGIN ** 2)))
+        out.append(dict(s, cells=c))
     return out
 
 
@@ -199,8 +228,9 @@ def _measure(spec, comm):
     """Build one scene on comm, warm up, time `repeats` x `steps` steps; the run record."""
     from . import throughput
     cfg = throughput.scene_config(spec)
-    cfg.update(ranks=comm.size, repeats=spec["repeats"], threads_per_rank=os.environ.get(
-        "OMP_NUM_THREADS"), timing="fastest repetition")
+    import numba
+    cfg.update(ranks=comm.size, repeats=spec["repeats"], threads_per_rank=numba.get_num_threads(),
+               omp_threads=os.environ.get("OMP_NUM_THREADS"), timing="fastest repetition")
     sim = throughput.build_scene(cfg, comm)
     p = sim.particles
     implicit = not sim.integrator.explicit
@@ -294,6 +324,8 @@ def _worker(spec_path, result_path):
     _install_probes()
     with open(spec_path) as f:
         specs = json.load(f)
+    if isinstance(specs, dict):             # weak scaling: the scenes of each rank count
+        specs = specs[str(comm.size)]
     runs = []
     for spec in specs:
         common.say(comm, f"  {spec['name']}: {spec['cells']}^2 cells, {comm.size} rank(s), "
@@ -332,7 +364,7 @@ def _child_env():
         os.pathsep) if p and p != root])
     env["OMPI_MCA_rmaps_base_oversubscribe"] = "1"
     env.setdefault("OMPI_MCA_btl_vader_single_copy_mechanism", "none")
-    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    for k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "NUMBA_NUM_THREADS"):
         env.setdefault(k, "1")
     return env
 
@@ -382,22 +414,36 @@ def _launch(cmd, env, timeout, verbose, label):
                            + "\n".join(tail))
 
 
+def _efficiency(p1, t1, pn, tn, n):
+    """(P_N / (N t_N)) / (P_1 / t_1): updates per second per rank against one rank."""
+    return (pn / (n * tn)) / (p1 / t1) if t1 > 0 and tn > 0 else None
+
+
 def _scaling(runs):
-    """scene -> t1, tN, speed-up and efficiency (from wall_per_step_s)."""
+    """scene -> t1, tN, speed-up and efficiency (from wall_per_step_s), and the efficiency
+    of each stage; also stored in each run's metrics."""
     out = {}
     for scene in dict.fromkeys(r["scene"] for r in runs):
         by = {r["ranks"]: r for r in runs if r["scene"] == scene}
         if 1 not in by:
             continue
-        t1 = by[1]["metrics"]["wall_per_step_s"]
-        entry = {"t_1_rank_s_per_step": t1}
+        m1, p1 = by[1]["metrics"], by[1]["n_particles"]
+        t1 = m1["wall_per_step_s"]
+        entry = {"t_1_rank_s_per_step": t1, "particles_1_rank": p1}
         for n, r in sorted(by.items()):
-            tn = r["metrics"]["wall_per_step_s"]
-            r["metrics"]["speedup"] = t1 / tn
-            r["metrics"]["efficiency"] = t1 / (n * tn)
+            m, pn = r["metrics"], r["n_particles"]
+            tn = m["wall_per_step_s"]
+            eff = _efficiency(p1, t1, pn, tn, n)
+            m["efficiency"], m["speedup"] = eff, n * eff
+            for k in EFF_STAGES:
+                e = _efficiency(p1, m1.get(f"t_{k}", 0.0), pn, m.get(f"t_{k}", 0.0), n)
+                if e is not None:
+                    m[f"efficiency_{k}"] = e
             if n > 1:
-                entry.update({f"t_{n}_ranks_s_per_step": tn, f"speedup_{n}_ranks": t1 / tn,
-                              f"efficiency_{n}_ranks": t1 / (n * tn)})
+                entry.update({f"t_{n}_ranks_s_per_step": tn, f"particles_{n}_ranks": pn,
+                              f"speedup_{n}_ranks": n * eff, f"efficiency_{n}_ranks": eff})
+                entry.update({f"efficiency_{k}_{n}_ranks": m[f"efficiency_{k}"]
+                              for k in EFF_STAGES if f"efficiency_{k}" in m})
         out[scene] = entry
     return out
 
@@ -429,7 +475,8 @@ def plot(doc, path, comm):
             m = r["metrics"]
             text = f"{m['wall_per_step_s']:.3g} s/step"
             if r["ranks"] > 1:
-                text += (f"\nspeed-up {m['speedup']:.2f}x\nefficiency {100 * m['efficiency']:.0f} %"
+                text += (f"\n{r['n_particles']:,} p\nspeed-up {m['speedup']:.2f}x"
+                         f"\nefficiency {100 * m['efficiency']:.0f} %"
                          f"\nimbalance {m['imbalance']:.3f}")
             if m.get("other_load_cores") is not None:
                 text += f"\nothers' load {m['other_load_cores']:.2f} cores"
@@ -446,7 +493,7 @@ def plot(doc, path, comm):
             ax.text(0.02, 0.98, f"target: speed-up >= {tgt:g} on 2 ranks", fontsize=7,
                     transform=ax.transAxes, va="top")
     return common.save_figure(fig, path, comm, title=common.figure_title(
-        doc, "MPI scaling", " (launched by a serial runner)"))
+        doc, f"MPI scaling ({doc.get('mode', 'strong')})", " (launched by a serial runner)"))
 
 
 def print_report(doc, comm):
@@ -472,12 +519,17 @@ def print_report(doc, comm):
                   "g2p", "constitutive", "guards", "other")]
     common.print_table(doc["runs"], stage_cols, comm, title="fraction of the step time per stage "
                        "(exclusive; assembly and ksp are parts of solve)")
+    eff_cols = [("run", "name"), ("particles", "n_particles"),
+                ("total", lambda r: r["metrics"].get("efficiency"))] + [
+        (k, (lambda k: lambda r: r["metrics"].get(f"efficiency_{k}"))(k)) for k in EFF_STAGES]
+    common.print_table(doc["runs"], eff_cols, comm, title=f"{doc.get('mode', 'strong')}-scaling "
+                       f"efficiency per stage: (P_N / (N t_N)) / (P_1 / t_1), 1 = ideal")
     starved = [r["name"] for r in doc["runs"] if r["metrics"]["cpu_utilization"] < 0.9]
     if starved:
         common.say(comm, f"  cpu/wall < 0.9 (the ranks did not get a full core each: other load "
                    f"on the machine, or ranks waiting for each other): {', '.join(starved)}")
     s = doc["scaling"].get("explicit-MUSL")
-    if s and "speedup_2_ranks" in s:
+    if s and "speedup_2_ranks" in s and doc.get("mode", "strong") == "strong":
         t = TARGETS["explicit_speedup_2_ranks"]
         common.say(comm, f"  explicit-MUSL: speed-up {s['speedup_2_ranks']:.2f}x on 2 ranks vs "
                    f"target {t:g}x: {'met' if s['speedup_2_ranks'] >= t else 'NOT met'} "
@@ -500,9 +552,12 @@ def _combine(records):
 
 
 def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repeats=None,
-        rounds=None, ranks=RANKS, max_wait=None, verbose=True, timeout=None):
+        rounds=None, ranks=RANKS, weak=False, max_wait=None, verbose=True, timeout=None):
     """Launch the workers, write out/mpi-scaling.json and out/mpi-scaling.png, print the
     table; returns the result dict.
+
+    ranks: the rank counts (positive integers, 1 among them). weak: weak scaling (the scene
+    on N ranks has N times the particles of the 1-rank scene) instead of strong scaling.
 
     The launches alternate between the rank counts, `rounds` times (default 2, quick 1), so
     that a burst of other load on the machine does not hit only one rank count; each
@@ -510,21 +565,24 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     Before each launch it waits (at most `max_wait` seconds: default 30, quick 0) until at
     most a quarter of the cores are busy with other work.
     Must run serially (RuntimeError under an MPI size > 1) with `mpirun` on PATH."""
+    ranks = tuple(ranks)
+    if (1 not in ranks or len(set(ranks)) != len(ranks)
+            or any(not (isinstance(n, int) and n >= 1) for n in ranks)):
+        raise ValueError(f"{CASE}: 'ranks' must be distinct positive integers including 1, "
+                         f"got {ranks!r}")
     comm = common.world(comm)
     if comm.size > 1:
         raise RuntimeError(REFUSAL)
     mpirun = shutil.which("mpirun")
     if mpirun is None:
         raise RuntimeError(f"{CASE}: 'mpirun' is not on PATH (the case launches "
-                           f"mpirun -n 1 and -n 2)")
-    ranks = tuple(ranks)
-    if 1 not in ranks or any(not (isinstance(n, int) and n >= 1) for n in ranks):
-        raise ValueError(f"{CASE}: 'ranks' must be positive integers including 1, got {ranks!r}")
+                           f"mpirun -n N for each rank count)")
     rounds = (1 if quick else 2) if rounds is None else rounds
     if not (isinstance(rounds, int) and rounds >= 1):
         raise ValueError(f"{CASE}: 'rounds' must be a positive integer, got {rounds!r}")
     max_wait = (0.0 if quick else 30.0) if max_wait is None else float(max_wait)
     specs = scenes(quick, scale, steps, repeats)
+    by_ranks = {n: weak_scenes(specs, n) if weak else specs for n in ranks}
     if timeout is None:
         timeout = 600.0 if quick else 3600.0
     env = _child_env()
@@ -534,7 +592,7 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     try:
         spec_path = os.path.join(tmpdir, "spec.json")
         with open(spec_path, "w") as f:
-            json.dump(specs, f)
+            json.dump({str(n): v for n, v in by_ranks.items()}, f)
         for k in range(rounds):
             for n in ranks:
                 result_path = os.path.join(tmpdir, f"result_{k}_{n}.json")
@@ -563,6 +621,7 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     scaling = _scaling(runs)
     cmd = shlex.join(launch_command(2, "SPEC", "RESULT", mpirun))
     doc = common.result(CASE, runs, comm, quick=quick, scale=scale, rounds=rounds,
+                        mode="weak" if weak else "strong", ranks=list(ranks),
                         max_wait_for_quiet_s=max_wait,
                         targets=TARGETS, scaling=scaling, launches=launches,
                         launch=dict(command=cmd, mpi_library=sorted(libs)),
@@ -575,6 +634,27 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, steps=None, repe
     return doc
 
 
+def rank_list(text):
+    """'1,2,4' -> (1, 2, 4) (argparse type of --ranks)."""
+    try:
+        ranks = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected rank counts like 1,2,4, got {text!r}")
+    if not ranks or 1 not in ranks or any(n < 1 for n in ranks) or len(set(ranks)) != len(ranks):
+        raise argparse.ArgumentTypeError(f"rank counts must be distinct, positive and include "
+                                         f"1, got {text!r}")
+    return ranks
+
+
+def add_arguments(parser):
+    """The case's command-line options (also offered by python -m fenicsmpm.bench)."""
+    parser.add_argument("--ranks", type=rank_list, default=RANKS, metavar="N,N,...",
+                        help="MPI rank counts to launch, 1 among them (default: "
+                             f"{','.join(map(str, RANKS))})")
+    parser.add_argument("--weak", action="store_true",
+                        help="weak scaling: particles per rank fixed (default: strong scaling)")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(prog="python -m fenicsmpm.bench.mpi_scaling",
                                  description=f"benchmark case {CASE} (or, with --worker, one "
@@ -583,11 +663,12 @@ def main(argv=None):
                     help="internal: run the scenes of SPEC on this MPI launch, write RESULT")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--out", default="bench-results")
+    add_arguments(ap)
     args = ap.parse_args(argv)
     if args.worker:
         _worker(*args.worker)
     else:
-        run(quick=args.quick, out=args.out)
+        run(quick=args.quick, out=args.out, ranks=args.ranks, weak=args.weak)
     return 0
 
 

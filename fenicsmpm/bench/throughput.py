@@ -14,6 +14,12 @@ Runs (full size / --quick):
   implicit Newmark with GMRES + block Jacobi/ILU (full size only): assembly against a cheap
       iterative solve (the mass term makes the system well conditioned at this dt)
 The warm-up absorbs numba compilation and first-call set-up; sim.timers are zeroed after it.
+These runs use the process's numba threads (NUMBA_NUM_THREADS; config "threads").
+
+Thread rows (serial runs only; doc["threads"]): the explicit MUSL scene above with the
+standard shape functions and with cpGIMP, each in a child process per thread count
+(NUMBA_NUM_THREADS = 1 and 2: `threads`), so one process on 1 and on 2 threads can be
+compared; speed-up = updates/s on N threads / updates/s on 1 thread, per shape.
 
 Metrics per run: particle_updates_per_s = n_particles * steps / wall_s; cpu_s (CPU time of
 the measured steps, all ranks), cpu_utilization = cpu_s / (wall_s * ranks) (< 1: the machine
@@ -25,9 +31,15 @@ newton_iterations (mean per step), ksp_iterations_per_step, n_dofs; memory: peak
 mem_bytes_per_particle (peak RSS during the run minus RSS before building the scene, over
 particles: everything the run needs, mesh, grid, matrix and factors included) and
 particle_array_bytes_per_particle (per-particle state and work arrays / particles)."""
+import argparse
 import gc
+import json
 import math
 import os
+import shutil
+import subprocess
+import sys
+import tempfile
 
 import numpy as np
 
@@ -69,6 +81,8 @@ TARGETS = {"explicit_particle_updates_per_s_serial": 5.0e6,
 PEERS = {"CB-Geo MPM, 1 core (particle updates/s)": 0.50e6}
 
 STAGES = ("locate", "shape", "p2g", "solve", "g2p", "constitutive")
+THREADS = (1, 2)                 # thread counts of the thread rows
+THREAD_SHAPES = ("mpm", "cpgimp")
 SUBSTAGES = ("assembly", "ksp")          # parts of "solve" (implicit)
 
 
@@ -89,7 +103,9 @@ def scene_config(spec):
     """The run's config record (h and dt are filled in by build_scene)."""
     n = spec["cells"]
     bx, by = n - 2 * MARGIN, n - MARGIN
-    cfg = dict(integrator=spec["integrator"], scheme=spec["scheme"], shape="Q1 (standard MPM)",
+    family = spec.get("shape")
+    cfg = dict(integrator=spec["integrator"], scheme=spec["scheme"],
+               shape=family or "Q1 (standard MPM)", shape_family=family,
                h=LENGTH / n, dt=None, ppc=spec["per_cell"] ** 2, per_cell=spec["per_cell"],
                cell_type="quadrilateral", grid_cells=[n, n], block_cells=[bx, by],
                margin_cells=MARGIN, length=LENGTH, material="LinearElastic", E=E, nu=NU,
@@ -128,16 +144,19 @@ def build_scene(cfg, comm=None):
         integ = fm.Newmark(beta=cfg["beta"], gamma=cfg["gamma"], **kw)
         dt = cfg["dt_factor"] * grid.h / mat.p_wave_speed      # = dt_factor * sim.dt_critical
     sim = fm.Simulation(grid, pts, integ, dt=dt, gravity=cfg["gravity"],
-                        cfl=cfg.get("cfl", 0.5), shape="mpm")
+                        cfl=cfg.get("cfl", 0.5), shape=cfg.get("shape_family") or "mpm")
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
     cfg["h"], cfg["dt"], cfg["dt_critical"] = grid.h, sim.dt, sim.dt_critical
+    cfg["shape_family"] = getattr(sim, "shape", cfg.get("shape_family"))    # as resolved
     return sim
 
 
 def run_scene(spec, comm=None):
     """Build, warm up, time; returns the run record."""
+    import numba
     comm = common.world(comm)
     cfg = scene_config(spec)
+    cfg["threads"] = numba.get_num_threads()
     mem = common.MemoryProbe(comm).start()
     sim = build_scene(cfg, comm)
     n_part = sim.particles.n_global()
@@ -181,6 +200,72 @@ def run_scene(spec, comm=None):
     del sim
     gc.collect()
     return rec
+
+
+def thread_scenes(quick=False, scale=1.0):
+    """The thread rows' scenes: the explicit MUSL scene with each of THREAD_SHAPES."""
+    base = next(s for s in scenes(quick, scale) if s["name"] == "explicit-MUSL")
+    return [dict(base, name=f"explicit-MUSL-{shape}", shape=shape) for shape in THREAD_SHAPES]
+
+
+def run_threads(quick=False, scale=1.0, threads=THREADS, verbose=True, timeout=None):
+    """The thread rows: for each thread count n a child process with NUMBA_NUM_THREADS=n
+    runs thread_scenes. Returns dict(runs=[records], speedup={scene: {n: updates/s on n
+    threads over 1 thread}}). Serial only (the children are plain processes)."""
+    from .mpi_scaling import _child_env
+    specs = thread_scenes(quick, scale)
+    timeout = timeout or (600.0 if quick else 3600.0)
+    tmp = tempfile.mkdtemp(prefix="fenicsmpm_threads_")
+    runs = []
+    try:
+        spec_path = os.path.join(tmp, "spec.json")
+        with open(spec_path, "w") as f:
+            json.dump(specs, f)
+        for n in threads:
+            result = os.path.join(tmp, f"result_{n}.json")
+            env = dict(_child_env(), NUMBA_NUM_THREADS=str(n))
+            cmd = [sys.executable, "-m", "fenicsmpm.bench.throughput", "--thread-worker",
+                   spec_path, result]
+            load = common._load_average()
+            if verbose:
+                print(f"[{CASE}] thread rows on {n} thread(s), load average {load} ...", flush=True)
+            r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=timeout)
+            if r.returncode != 0:
+                raise RuntimeError(f"{CASE}: the {n}-thread child exited with status "
+                                   f"{r.returncode}:\n{r.stderr[-3000:]}")
+            with open(result) as f:
+                for rec in json.load(f):
+                    rec["load_average_1min_before"] = load
+                    runs.append(rec)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    speedup = {}
+    for scene in dict.fromkeys(r["scene"] for r in runs):
+        by = {r["threads"]: r["metrics"]["particle_updates_per_s"] for r in runs
+              if r["scene"] == scene}
+        if 1 in by:
+            speedup[scene] = {str(n): v / by[1] for n, v in sorted(by.items())}
+            for r in runs:
+                if r["scene"] == scene:
+                    r["metrics"]["speedup_over_1_thread"] = by[r["threads"]] / by[1]
+    return dict(runs=runs, speedup=speedup, command=f"NUMBA_NUM_THREADS=N {sys.executable} -m "
+                f"fenicsmpm.bench.throughput --thread-worker SPEC RESULT")
+
+
+def _thread_worker(spec_path, result_path):
+    """One thread-row child: run the scenes of SPEC on this process's numba threads."""
+    import numba
+    with open(spec_path) as f:
+        specs = json.load(f)
+    out = []
+    for spec in specs:
+        rec = run_scene(spec)
+        n = numba.get_num_threads()
+        rec.update(scene=spec["name"], threads=n,
+                   name=f"{spec['name']} / {n} thread{'s' if n > 1 else ''}")
+        out.append(rec)
+    with open(result_path, "w") as f:
+        json.dump(common._clean(out), f)
 
 
 def _stacks(runs):
@@ -242,19 +327,36 @@ def print_report(doc, comm):
         m = r["metrics"]
         if r["config"]["integrator"] == "Explicit":
             t = TARGETS["explicit_particle_updates_per_s_serial"]
-            common.say(comm, f"  {r['name']}: {m['particle_updates_per_s'] / 1e6:.2f} M updates/s"
-                       f" vs target {t / 1e6:.0f} M (serial): "
+            nt = r["config"].get("threads", 1)
+            common.say(comm, f"  {r['name']} ({comm.size} rank(s) x {nt} thread(s)): "
+                       f"{m['particle_updates_per_s'] / 1e6:.2f} M updates/s"
+                       f" vs target {t / 1e6:.0f} M (one core): "
                        f"{'met' if m['particle_updates_per_s'] >= t else 'NOT met'}")
         elif "assembly_over_ksp" in m and m["assembly_over_ksp"] is not None:
             common.say(comm, f"  {r['name']}: assembly/KSP = {m['assembly_over_ksp']:.3g} vs "
                        f"target <= 1: {'met' if m['assembly_over_ksp'] <= 1 else 'NOT met'}")
+    th = doc.get("threads")
+    if th and th.get("runs"):
+        cols = [("run", "name"), ("particles", "n_particles"), ("threads", "threads"),
+                ("updates/s", lambda r: r["metrics"]["particle_updates_per_s"]),
+                ("speed-up", lambda r: r["metrics"].get("speedup_over_1_thread")),
+                ("cpu/wall", lambda r: r["metrics"]["cpu_utilization"]),
+                ("shape", lambda r: r["metrics"].get("frac_shape")),
+                ("p2g", lambda r: r["metrics"].get("frac_p2g")),
+                ("g2p", lambda r: r["metrics"].get("frac_g2p")),
+                ("constitutive", lambda r: r["metrics"].get("frac_constitutive")),
+                ("load before", "load_average_1min_before")]
+        common.print_table(th["runs"], cols, comm, title="one process on 1 and 2 numba threads "
+                           "(NUMBA_NUM_THREADS; cpu/wall: CPU seconds per wall second; shape..."
+                           "constitutive: fractions of the step)")
     for k, v in PEERS.items():
         common.say(comm, f"  peer: {k} = {v / 1e6:.2f} M")
 
 
-def run(quick=False, out="bench-results", comm=None, scale=1.0, verbose=True):
+def run(quick=False, out="bench-results", comm=None, scale=1.0, verbose=True, threads=THREADS):
     """Run the case, write out/throughput.json and out/throughput.png, print the table.
-    Returns the result dict (on every rank)."""
+    Returns the result dict (on every rank). threads: the thread counts of the thread rows
+    (run_threads; () for none; skipped under MPI)."""
     comm = common.world(comm)
     runs = []
     for spec in scenes(quick, scale):
@@ -267,9 +369,33 @@ def run(quick=False, out="bench-results", comm=None, scale=1.0, verbose=True):
             r = runs[-1]
             common.say(comm, f"    {r['n_particles']:,} particles, {r['wall_s']:.3g} s, "
                        f"{r['metrics']['particle_updates_per_s']:.3g} updates/s")
-    doc = common.result(CASE, runs, comm, quick=quick, scale=scale, targets=TARGETS, peers=PEERS)
+    extra = {}
+    if threads and comm.size == 1:
+        extra["threads"] = run_threads(quick, scale, tuple(threads), verbose)
+    doc = common.result(CASE, runs, comm, quick=quick, scale=scale, targets=TARGETS, peers=PEERS,
+                        **extra)
     common.write_result(doc, out, comm)
     plot(doc, os.path.join(out, f"{CASE}.png"), comm)
     if verbose:
         print_report(doc, comm)
     return doc
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(prog="python -m fenicsmpm.bench.throughput",
+                                 description=f"benchmark case {CASE} (or, with --thread-worker, "
+                                             f"one thread-row child)")
+    ap.add_argument("--thread-worker", nargs=2, metavar=("SPEC", "RESULT"),
+                    help="internal: run the scenes of SPEC on this process's threads")
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", default="bench-results")
+    args = ap.parse_args(argv)
+    if args.thread_worker:
+        _thread_worker(*args.thread_worker)
+    else:
+        run(quick=args.quick, out=args.out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

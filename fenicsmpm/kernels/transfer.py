@@ -7,26 +7,54 @@ so the short loops over dimensions are unrolled (about 2x faster than a runtime 
 Every grid integral is a particle sum with weight V_p (DESIGN.md):
   m_i = sum_p N_ip m_p,   (m v)_i = sum_p N_ip m_p v_p,
   f_i = sum_p N_ip m_p g - sum_p V_p sigma_p . grad N_ip      (seed 000 eq 2.22, no D: errata)
+
+The particle passes run on numba's threads (kernels.threads): each public kernel cuts the
+particles into chunks and runs a serial loop over a range [lo, hi) (the `_name` function
+beside it) per chunk; P2G kernels give the chunks their own nodal arrays, added afterwards.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..materials.piola import det3, work_increment
+from .threads import (PRANGE, add_chunks1, add_chunks2, chunk, n_chunks, node_range,
+                      particle_chunks, scratch)
 
 
+# ---------------------------------------------------------------------- P2G
 @njit(cache=True)
-def p2g_mass(nodes, N, mass, m_out):
-    """m_i += sum_p N_ip m_p."""
-    for p in range(nodes.shape[0]):
+def _mass(nodes, N, mass, lo, hi, m_out):
+    for p in range(lo, hi):
         for a in range(nodes.shape[1]):
             m_out[nodes[p, a]] += N[p, a] * mass[p]
 
 
+def p2g_mass(nodes, N, mass, m_out):
+    """m_i += sum_p N_ip m_p."""
+    nc = n_chunks(len(nodes))
+    _p2g_mass_chunks(nc, nodes, N, mass, m_out, scratch(0, nc - 1, m_out))
+
+
+@njit(parallel=PRANGE, cache=True)
+def _p2g_mass_chunks(nc, nodes, N, mass, m_out, mb):
+    n = nodes.shape[0]
+    if nc == 1:
+        return _mass(nodes, N, mass, 0, n, m_out)
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        if c == 0:
+            _mass(nodes, N, mass, lo, hi, m_out)
+        else:
+            a, b = node_range(nodes, lo, hi, rng[c])
+            mb[c - 1, a:b] = 0.0
+            _mass(nodes, N, mass, lo, hi, mb[c - 1])
+    add_chunks1(m_out, mb, rng)
+
+
 @njit(cache=True)
-def p2g_mass_momentum(D, nodes, N, mass, v, m_out, mv_out):
-    """m_i += sum_p N_ip m_p and (m v)_i += sum_p N_ip m_p v_p in one pass."""
+def _mass_momentum(D, nodes, N, mass, v, lo, hi, m_out, mv_out):
     d = len(D)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         mp = mass[p]
         for a in range(nodes.shape[1]):
             w = N[p, a] * mp
@@ -36,11 +64,36 @@ def p2g_mass_momentum(D, nodes, N, mass, v, m_out, mv_out):
                 mv_out[i, k] += w * v[p, k]
 
 
+def p2g_mass_momentum(D, nodes, N, mass, v, m_out, mv_out):
+    """m_i += sum_p N_ip m_p and (m v)_i += sum_p N_ip m_p v_p in one pass."""
+    nc = n_chunks(len(nodes))
+    _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, scratch(0, nc - 1, m_out),
+                              scratch(1, nc - 1, mv_out))
+
+
+@njit(parallel=PRANGE, cache=True)
+def _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, mb, mvb):
+    n = nodes.shape[0]
+    if nc == 1:
+        return _mass_momentum(D, nodes, N, mass, v, 0, n, m_out, mv_out)
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        if c == 0:
+            _mass_momentum(D, nodes, N, mass, v, lo, hi, m_out, mv_out)
+        else:
+            a, b = node_range(nodes, lo, hi, rng[c])
+            mb[c - 1, a:b] = 0.0
+            mvb[c - 1, a:b] = 0.0
+            _mass_momentum(D, nodes, N, mass, v, lo, hi, mb[c - 1], mvb[c - 1])
+    add_chunks1(m_out, mb, rng)
+    add_chunks2(mv_out, mvb, rng)
+
+
 @njit(cache=True)
-def p2g_weighted(D, nodes, N, mass, q, out):
-    """out_i += sum_p N_ip m_p q_p (momentum for q = v, mass-weighted acceleration for q = a)."""
+def _weighted(D, nodes, N, mass, q, lo, hi, out):
     d = len(D)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         for a in range(nodes.shape[1]):
             w = N[p, a] * mass[p]
             i = nodes[p, a]
@@ -48,14 +101,33 @@ def p2g_weighted(D, nodes, N, mass, q, out):
                 out[i, k] += w * q[p, k]
 
 
-@njit(cache=True)
-def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
-    """out_i += sum_p (N_ip m_p g - V_p stress_p . grad N_ip).
+def p2g_weighted(D, nodes, N, mass, q, out):
+    """out_i += sum_p N_ip m_p q_p (momentum for q = v, mass-weighted acceleration for q = a)."""
+    nc = n_chunks(len(nodes))
+    _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, scratch(0, nc - 1, out))
 
-    `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
-    the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
+
+@njit(parallel=PRANGE, cache=True)
+def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, buf):
+    n = nodes.shape[0]
+    if nc == 1:
+        return _weighted(D, nodes, N, mass, q, 0, n, out)
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        if c == 0:
+            _weighted(D, nodes, N, mass, q, lo, hi, out)
+        else:
+            a, b = node_range(nodes, lo, hi, rng[c])
+            buf[c - 1, a:b] = 0.0
+            _weighted(D, nodes, N, mass, q, lo, hi, buf[c - 1])
+    add_chunks2(out, buf, rng)
+
+
+@njit(cache=True)
+def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out):
     d = len(D)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         for a in range(nodes.shape[1]):
             i = nodes[p, a]
             for k in range(d):
@@ -65,18 +137,85 @@ def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
                 out[i, k] += N[p, a] * mass[p] * g[k] - V[p] * s
 
 
+def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
+    """out_i += sum_p (N_ip m_p g - V_p stress_p . grad N_ip).
+
+    `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
+    the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
+    nc = n_chunks(len(nodes))
+    _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, scratch(0, nc - 1, out))
+
+
+@njit(parallel=PRANGE, cache=True)
+def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
+    n = nodes.shape[0]
+    if nc == 1:
+        return _force(D, nodes, N, dN, mass, V, stress, g, 0, n, out)
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        if c == 0:
+            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out)
+        else:
+            a, b = node_range(nodes, lo, hi, rng[c])
+            buf[c - 1, a:b] = 0.0
+            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, buf[c - 1])
+    add_chunks2(out, buf, rng)
+
+
 @njit(cache=True)
-def restrict_gradients(D, nodes, N, dN, active, field):
-    """Gradients restricted to active nodes, keeping sum_i G_ip = 0 exactly:
-        G_ip = grad N_ip - N_ip sum_{a active} grad N_ap  (active i),   G_ip = 0 (inactive i).
-    Inactive nodes carry no mass, so N_ip ~ 0 there while grad N_ip is not: without this, a
-    particle on a cell face (or next to an empty cell) sees a zero velocity at such a node and
-    gets a spurious velocity gradient. G = grad N whenever all of a particle's nodes are
-    active. `active` is (n_nodes, n_fields): particle p sees column field[p] (one column for
-    single-field MPM; one per body in multi-velocity contact). Applied in place to dN."""
+def _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, m_out, mv_out):
+    d = len(D)
+    for p in range(lo, hi):
+        mp = mass[p]
+        for a in range(nodes.shape[1]):
+            w = N[p, a] * mp
+            i = nodes[p, a]
+            if with_mass:
+                m_out[i] += w
+            for k in range(d):
+                s = v[p, k]
+                for l in range(d):
+                    s += C[p, k, l] * (node_x[i, l] - x[p, l])
+                mv_out[i, k] += w * s
+
+
+def p2g_affine(D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out):
+    """APIC momentum (Jiang et al. 2015, eq 10 with C_p in place of B_p D_p^-1):
+        (m v)_i += sum_p N_ip m_p (v_p + C_p (x_i - x_p)),   m_i += sum_p N_ip m_p (with_mass).
+    With C_p the velocity gradient of the last G2P (g2p_affine) an affine velocity field is
+    carried to the nodes exactly (partition of unity and linear reproduction)."""
+    nc = n_chunks(len(nodes))
+    _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out,
+                       scratch(0, nc - 1, m_out), scratch(1, nc - 1, mv_out))
+
+
+@njit(parallel=PRANGE, cache=True)
+def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out, mb,
+                       mvb):
+    n = nodes.shape[0]
+    if nc == 1:
+        return _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, 0, n, m_out, mv_out)
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        if c == 0:
+            _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, m_out, mv_out)
+        else:
+            a, b = node_range(nodes, lo, hi, rng[c])
+            mb[c - 1, a:b] = 0.0
+            mvb[c - 1, a:b] = 0.0
+            _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, mb[c - 1], mvb[c - 1])
+    add_chunks1(m_out, mb, rng)
+    add_chunks2(mv_out, mvb, rng)
+
+
+# ---------------------------------------------------------------------- per-particle passes
+@njit(cache=True)
+def _restrict(D, nodes, N, dN, active, field, lo, hi):
     d = len(D)
     s = np.empty(d)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         f = field[p]
         full = True
         for a in range(nodes.shape[1]):
@@ -99,12 +238,28 @@ def restrict_gradients(D, nodes, N, dN, active, field):
                     dN[p, a, k] = 0.0
 
 
+@njit(parallel=PRANGE, cache=True)
+def restrict_gradients(D, nodes, N, dN, active, field):
+    """Gradients restricted to active nodes, keeping sum_i G_ip = 0 exactly:
+        G_ip = grad N_ip - N_ip sum_{a active} grad N_ap  (active i),   G_ip = 0 (inactive i).
+    Inactive nodes carry no mass, so N_ip ~ 0 there while grad N_ip is not: without this, a
+    particle on a cell face (or next to an empty cell) sees a zero velocity at such a node and
+    gets a spurious velocity gradient. G = grad N whenever all of a particle's nodes are
+    active. `active` is (n_nodes, n_fields): particle p sees column field[p] (one column for
+    single-field MPM; one per body in multi-velocity contact). Applied in place to dN."""
+    n = nodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _restrict(D, nodes, N, dN, active, field, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _restrict(D, nodes, N, dN, active, field, lo, hi)
+
+
 @njit(cache=True)
-def flip_blend(D, nodes, N, old, new, flip, q):
-    """q_p = flip (q_p + sum N (new - old)_i) + (1 - flip) sum N new_i (FLIP/PIC blend of a
-    nodal field's change; the acceleration update of implicit runs)."""
+def _flip_blend(D, nodes, N, old, new, flip, q, lo, hi):
     d = len(D)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         for k in range(d):
             dq = 0.0
             qn = 0.0
@@ -115,14 +270,23 @@ def flip_blend(D, nodes, N, old, new, flip, q):
             q[p, k] = flip * (q[p, k] + dq) + (1.0 - flip) * qn
 
 
-@njit(cache=True)
-def incremental_F(D, nodes, dN, w, scale, dF_out):
-    """dF_p = I + scale * sum_i w_i (x) grad N_ip, as 3x3 (plane strain in 2D).
+@njit(parallel=PRANGE, cache=True)
+def flip_blend(D, nodes, N, old, new, flip, q):
+    """q_p = flip (q_p + sum N (new - old)_i) + (1 - flip) sum N new_i (FLIP/PIC blend of a
+    nodal field's change; the acceleration update of implicit runs)."""
+    n = nodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _flip_blend(D, nodes, N, old, new, flip, q, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _flip_blend(D, nodes, N, old, new, flip, q, lo, hi)
 
-    For w = grid velocity and scale = dt this is I + dt L (explicit); for w = the step's
-    displacement increment and scale = 1 it is the incremental deformation gradient."""
+
+@njit(cache=True)
+def _incremental_F(D, nodes, dN, w, scale, lo, hi, dF_out):
     d = len(D)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         for i in range(3):
             for j in range(3):
                 dF_out[p, i, j] = 1.0 if i == j else 0.0
@@ -134,14 +298,25 @@ def incremental_F(D, nodes, dN, w, scale, dF_out):
                     dF_out[p, i, j] += wi * dN[p, a, j]
 
 
-@njit(cache=True)
-def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
-    """Particle update from grid results (seed 002 §2; FLIP/PIC blend).
+@njit(parallel=PRANGE, cache=True)
+def incremental_F(D, nodes, dN, w, scale, dF_out):
+    """dF_p = I + scale * sum_i w_i (x) grad N_ip, as 3x3 (plane strain in 2D).
 
-    x_p += sum N du_i; u_p likewise;
-    v_p = flip (v_p + sum N (v_new - v_old)_i) + (1 - flip) sum N v_new_i."""
+    For w = grid velocity and scale = dt this is I + dt L (explicit); for w = the step's
+    displacement increment and scale = 1 it is the incremental deformation gradient."""
+    n = nodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _incremental_F(D, nodes, dN, w, scale, 0, n, dF_out)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _incremental_F(D, nodes, dN, w, scale, lo, hi, dF_out)
+
+
+@njit(cache=True)
+def _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, lo, hi):
     d = len(D)
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         for k in range(d):
             dx = 0.0
             dv = 0.0
@@ -157,38 +332,27 @@ def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
             v[p, k] = flip * (v[p, k] + dv) + (1.0 - flip) * vp
 
 
-@njit(cache=True)
-def p2g_affine(D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out):
-    """APIC momentum (Jiang et al. 2015, eq 10 with C_p in place of B_p D_p^-1):
-        (m v)_i += sum_p N_ip m_p (v_p + C_p (x_i - x_p)),   m_i += sum_p N_ip m_p (with_mass).
-    With C_p the velocity gradient of the last G2P (g2p_affine) an affine velocity field is
-    carried to the nodes exactly (partition of unity and linear reproduction)."""
-    d = len(D)
-    for p in range(nodes.shape[0]):
-        mp = mass[p]
-        for a in range(nodes.shape[1]):
-            w = N[p, a] * mp
-            i = nodes[p, a]
-            if with_mass:
-                m_out[i] += w
-            for k in range(d):
-                s = v[p, k]
-                for l in range(d):
-                    s += C[p, k, l] * (node_x[i, l] - x[p, l])
-                mv_out[i, k] += w * s
+@njit(parallel=PRANGE, cache=True)
+def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
+    """Particle update from grid results (seed 002 §2; FLIP/PIC blend).
+
+    x_p += sum N du_i; u_p likewise;
+    v_p = flip (v_p + sum N (v_new - v_old)_i) + (1 - flip) sum N v_new_i."""
+    n = nodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, lo, hi)
 
 
 @njit(cache=True)
-def g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C):
-    """APIC particle update (Jiang et al. 2015, eqs 8-9): v_p = sum N v_i (PIC) and
-        C_p = B_p D_p^-1,  B_p = sum_i N_ip v_i (x_i - x_p)^T,  D_p = sum_i N_ip (x_i - x_p)(x_i - x_p)^T,
-    with x_p the start-of-step position (angular momentum is conserved exactly); where D_p is
-    singular (a particle on a node of a multilinear cell) C_p = sum v_i (x) grad N_ip.
-    Then x_p += sum N du_i."""
+def _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, lo, hi):
     d = len(D)
     B = np.zeros((d, d))
     Dm = np.zeros((d, d))
-    for p in range(nodes.shape[0]):
+    for p in range(lo, hi):
         B[:] = 0.0
         Dm[:] = 0.0
         for a in range(nodes.shape[1]):
@@ -229,16 +393,27 @@ def g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C):
             v[p, k] = vp
 
 
+@njit(parallel=PRANGE, cache=True)
+def g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C):
+    """APIC particle update (Jiang et al. 2015, eqs 8-9): v_p = sum N v_i (PIC) and
+        C_p = B_p D_p^-1,  B_p = sum_i N_ip v_i (x_i - x_p)^T,  D_p = sum_i N_ip (x_i - x_p)(x_i - x_p)^T,
+    with x_p the start-of-step position (angular momentum is conserved exactly); where D_p is
+    singular (a particle on a node of a multilinear cell) C_p = sum v_i (x) grad N_ip.
+    Then x_p += sum N du_i."""
+    n = nodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, lo, hi)
+
+
 @njit(cache=True)
-def commit_step(dF, F, V, sigma, sigma_new, work, inverted):
-    """Accept a step for every particle, in one pass: work += trapezoidal stress work,
-    V <- det(dF) V, F <- dF F, sigma <- sigma_new. A particle whose increment inverts it
-    (det dF <= 0: flag 1) or whose increment is not finite (flag 2) keeps its state and is
-    flagged in `inverted` for the guards, so no NaN stress of an inverted material point is
-    ever committed. Returns their count."""
+def _commit(dF, F, V, sigma, sigma_new, work, inverted, lo, hi):
     tmp = np.empty((3, 3))
     n_bad = 0
-    for p in range(dF.shape[0]):
+    for p in range(lo, hi):
         J = det3(dF[p])
         if not (J > 0.0) or not np.isfinite(J):
             inverted[p] = 1 if np.isfinite(J) else 2
@@ -255,6 +430,24 @@ def commit_step(dF, F, V, sigma, sigma_new, work, inverted):
                 F[p, i, j] = tmp[i, j]
                 sigma[p, i, j] = sigma_new[p, i, j]
     return n_bad
+
+
+@njit(parallel=PRANGE, cache=True)
+def commit_step(dF, F, V, sigma, sigma_new, work, inverted):
+    """Accept a step for every particle, in one pass: work += trapezoidal stress work,
+    V <- det(dF) V, F <- dF F, sigma <- sigma_new. A particle whose increment inverts it
+    (det dF <= 0: flag 1) or whose increment is not finite (flag 2) keeps its state and is
+    flagged in `inverted` for the guards, so no NaN stress of an inverted material point is
+    ever committed. Returns their count."""
+    n = dF.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _commit(dF, F, V, sigma, sigma_new, work, inverted, 0, n)
+    bad = np.zeros(nc, dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        bad[c] = _commit(dF, F, V, sigma, sigma_new, work, inverted, lo, hi)
+    return bad.sum()
 
 
 # ---------------------------------------------------------------------- CSR assembly

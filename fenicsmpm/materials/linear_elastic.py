@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from .validation import check_open_interval, check_positive
+from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 __all__ = ["LinearElastic", "IsotropicElasticParameters", "jaumann_tangent",
            "linear_elastic_stress_kernel", "linear_elastic_tangent_kernel"]
@@ -95,11 +96,10 @@ class IsotropicElasticParameters:
 
 
 @numba.njit(cache=True)
-def linear_elastic_stress_kernel(idx, dF, sigma_old, sigma_new, lam, mu):
-    """sigma_new = sigma_old + lam tr(eps) I + 2 mu eps + omega sigma_old - sigma_old omega."""
+def _stress(idx, dF, sigma_old, sigma_new, lam, mu, lo, hi):
     eps = np.empty((3, 3))
     om = np.empty((3, 3))
-    for q in range(idx.shape[0]):
+    for q in range(lo, hi):
         p = idx[q]
         for i in range(3):
             for j in range(3):
@@ -116,6 +116,19 @@ def linear_elastic_stress_kernel(idx, dF, sigma_old, sigma_new, lam, mu):
                 for m in range(3):
                     s += om[i, m] * sigma_old[p, m, j] - sigma_old[p, i, m] * om[m, j]
                 sigma_new[p, i, j] = s
+
+
+@numba.njit(parallel=PRANGE, cache=True)
+def linear_elastic_stress_kernel(idx, dF, sigma_old, sigma_new, lam, mu):
+    """sigma_new = sigma_old + lam tr(eps) I + 2 mu eps + omega sigma_old - sigma_old omega
+    (threaded over chunks of idx, kernels.threads)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _stress(idx, dF, sigma_old, sigma_new, lam, mu, 0, n)
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _stress(idx, dF, sigma_old, sigma_new, lam, mu, lo, hi)
 
 
 @numba.njit(cache=True)

@@ -20,18 +20,17 @@ Both satisfy sum_i phi_ip = 1 and sum_i grad phi_ip = 0 and reproduce affine fie
 (S_i does at each corner).
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 N_CORNERS = 4
 _GP = (0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0))
 
 
 @njit(cache=True)
-def cpdi1_corners(x, F, r0, corners_out):
-    """Corners of the CPDI1 parallelograms: r_k = F_p r_k^0 (in-plane block of F), corners
-    x_p -(r1+r2)/2, x_p +(r1-r2)/2, x_p +(r1+r2)/2, x_p -(r1-r2)/2. r0: (n, 2, 2), r0[p, k]
-    is the initial edge vector k."""
-    for p in range(x.shape[0]):
+def _cpdi1_corners(x, F, r0, corners_out, lo, hi):
+    for p in range(lo, hi):
         r1x = F[p, 0, 0] * r0[p, 0, 0] + F[p, 0, 1] * r0[p, 0, 1]
         r1y = F[p, 1, 0] * r0[p, 0, 0] + F[p, 1, 1] * r0[p, 0, 1]
         r2x = F[p, 0, 0] * r0[p, 1, 0] + F[p, 0, 1] * r0[p, 1, 1]
@@ -46,17 +45,28 @@ def cpdi1_corners(x, F, r0, corners_out):
         corners_out[p, 3, 1] = x[p, 1] - 0.5 * (r1y - r2y)
 
 
+@njit(parallel=PRANGE, cache=True)
+def cpdi1_corners(x, F, r0, corners_out):
+    """Corners of the CPDI1 parallelograms: r_k = F_p r_k^0 (in-plane block of F), corners
+    x_p -(r1+r2)/2, x_p +(r1-r2)/2, x_p +(r1+r2)/2, x_p -(r1-r2)/2. r0: (n, 2, 2), r0[p, k]
+    is the initial edge vector k."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _cpdi1_corners(x, F, r0, corners_out, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _cpdi1_corners(x, F, r0, corners_out, lo, hi)
+
+
 @njit(cache=True)
-def corner_weights(corners, w_out, g_out):
-    """w_c = int M_c dx (2 x 2 Gauss on the bilinear map of the quadrilateral, exact) and
-    g_c = 1/2 R (x_{c+1} - x_{c-1}) for each particle's domain (corners counter-clockwise).
-    Returns the smallest domain area (<= 0: a domain turned inside out)."""
+def _corner_weights(corners, w_out, g_out, lo, hi):
     vmin = np.inf
     # reference corners (0,0), (1,0), (1,1), (0,1) in the counter-clockwise order
     rx = (0.0, 1.0, 1.0, 0.0)
     ry = (0.0, 0.0, 1.0, 1.0)
     M = np.empty(4)
-    for p in range(corners.shape[0]):
+    for p in range(lo, hi):
         for c in range(4):
             w_out[p, c] = 0.0
             nxt = corners[p, (c + 1) % 4]
@@ -85,16 +95,27 @@ def corner_weights(corners, w_out, g_out):
     return vmin
 
 
-@njit(cache=True)
-def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
-    """phi_ip and grad phi_ip from the corner shape functions (see the module docstring).
+@njit(parallel=PRANGE, cache=True)
+def corner_weights(corners, w_out, g_out):
+    """w_c = int M_c dx (2 x 2 Gauss on the bilinear map of the quadrilateral, exact) and
+    g_c = 1/2 R (x_{c+1} - x_{c-1}) for each particle's domain (corners counter-clockwise).
+    Returns the smallest domain area (<= 0: a domain turned inside out)."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _corner_weights(corners, w_out, g_out, 0, n)
+    vmin = np.empty(nc)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        vmin[c] = _corner_weights(corners, w_out, g_out, lo, hi)
+    return vmin.min()
 
-    cnodes, cN: (n, 4, nvc) grid nodes and standard shape values at each corner; w (n, 4),
-    g (n, 4, 2) from corner_weights. Nodes shared by several corners are merged: each node
-    appears once (count_out[p] of them), then padding (a valid node with N = dN = 0)."""
+
+@njit(cache=True)
+def _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, hi):
     d = len(D)
     nv = nodes_out.shape[1]
-    for p in range(cnodes.shape[0]):
+    for p in range(lo, hi):
         V = w[p, 0] + w[p, 1] + w[p, 2] + w[p, 3]
         cnt = 0
         for c in range(4):
@@ -125,16 +146,43 @@ def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
                 dN_out[p, a, k] = 0.0
 
 
+@njit(parallel=PRANGE, cache=True)
+def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
+    """phi_ip and grad phi_ip from the corner shape functions (see the module docstring).
+
+    cnodes, cN: (n, 4, nvc) grid nodes and standard shape values at each corner; w (n, 4),
+    g (n, 4, 2) from corner_weights. Nodes shared by several corners are merged: each node
+    appears once (count_out[p] of them), then padding (a valid node with N = dN = 0)."""
+    n = cnodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, hi)
+
+
 @njit(cache=True)
-def move_corners(D, cnodes, cN, du, corners):
-    """CPDI2 corner update x_c += sum_i S_i(x_c) du_i (du: the step's nodal displacement)."""
+def _move_corners(D, cnodes, cN, du, corners, lo, hi):
     d = len(D)
-    for p in range(corners.shape[0]):
+    for p in range(lo, hi):
         for c in range(4):
             for a in range(cnodes.shape[2]):
                 i = cnodes[p, c, a]
                 for k in range(d):
                     corners[p, c, k] += cN[p, c, a] * du[i, k]
+
+
+@njit(parallel=PRANGE, cache=True)
+def move_corners(D, cnodes, cN, du, corners):
+    """CPDI2 corner update x_c += sum_i S_i(x_c) du_i (du: the step's nodal displacement)."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _move_corners(D, cnodes, cN, du, corners, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _move_corners(D, cnodes, cN, du, corners, lo, hi)
 
 
 def initial_edges(grid, particles):

@@ -23,9 +23,10 @@ uGIMP keeps l_p = l_p^0; cpGIMP (contiguous particle GIMP, Wallstedt & Guilkey 2
 l_p,k = l_p,k^0 |F_kk| (the box follows the stretch along each axis).
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..kernels.axisymmetric import meridian_area
+from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 
 @njit(cache=True)
@@ -64,19 +65,8 @@ def weight_1d(xp, lp, xi_node, L, lo, hi):
 
 
 @njit(cache=True)
-def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns,
-               nodes_out, N_out, dN_out, count_out):
-    """GIMP weights of every particle on the lattice nodes its box overlaps.
-
-    x (n, d) positions; lp0 (n, d) initial half-widths; F (n, 3, 3): with `contiguous` the
-    half-widths are lp0_k |F_kk| (cpGIMP), else lp0 (uGIMP). origin/spacing: global lattice
-    origin and cell size per axis; lo/hi: the grid's extent (boxes are clipped to it);
-    table: local node index of lattice point ilo + j (j < nlat, flat, axis 0 fastest), or
-    -1 where the point is not a local node. ns: nodes per axis looked at, ceil(2 l / L) + 2,
-    enough for any box of half-width l.
-    Output per particle: the nonzero-weight nodes first (count_out of them), then padding
-    (a valid node with N = dN = 0). Returns -1, or the index of a particle whose box reaches a
-    node that is not local (the caller raises)."""
+def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns, p0, p1,
+          nodes_out, N_out, dN_out, count_out):
     d = len(D)
     nv = nodes_out.shape[1]
     Sk = np.empty((d, ns))
@@ -84,7 +74,7 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
     jk = np.empty((d, ns), dtype=np.int64)
     idx = np.empty(d, dtype=np.int64)
     bad = -1
-    for p in range(x.shape[0]):
+    for p in range(p0, p1):
         for k in range(d):
             lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
             L = spacing[k]
@@ -144,6 +134,33 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
             for k in range(d):
                 dN_out[p, a, k] = 0.0
     return bad
+
+
+@njit(parallel=PRANGE, cache=True)
+def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns,
+               nodes_out, N_out, dN_out, count_out):
+    """GIMP weights of every particle on the lattice nodes its box overlaps.
+
+    x (n, d) positions; lp0 (n, d) initial half-widths; F (n, 3, 3): with `contiguous` the
+    half-widths are lp0_k |F_kk| (cpGIMP), else lp0 (uGIMP). origin/spacing: global lattice
+    origin and cell size per axis; lo/hi: the grid's extent (boxes are clipped to it);
+    table: local node index of lattice point ilo + j (j < nlat, flat, axis 0 fastest), or
+    -1 where the point is not a local node. ns: nodes per axis looked at, ceil(2 l / L) + 2,
+    enough for any box of half-width l.
+    Output per particle: the nonzero-weight nodes first (count_out of them), then padding
+    (a valid node with N = dN = 0). Returns -1, or the index of a particle whose box reaches a
+    node that is not local (the caller raises)."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns,
+                     0, n, nodes_out, N_out, dN_out, count_out)
+    bad = np.empty(nc, dtype=np.int64)
+    for c in prange(nc):
+        p0, p1 = chunk(n, nc, c)
+        bad[c] = _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns,
+                       p0, p1, nodes_out, N_out, dN_out, count_out)
+    return bad.max()
 
 
 def lattice(grid):

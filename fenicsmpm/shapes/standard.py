@@ -7,10 +7,13 @@ N_a(xi) = prod_k (xi_k if bit_k(a) else 1 - xi_k), and the P1 basis is
 N_0 = 1 - sum(xi), N_{k+1} = xi_k.
 
 Kernels are written for any dimension d in {2, 3}; `kind` is 0 for simplices and 1 for
-tensor-product cells.
+tensor-product cells. The per-point passes (location, pull-back, shape functions) run on
+numba's threads in chunks (kernels.threads): a serial loop `_name(..., lo, hi)` per chunk.
 """
 import numpy as np
-from numba import njit
+from numba import njit, prange
+
+from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 SIMPLEX = 0
 TENSOR = 1
@@ -129,15 +132,11 @@ def _inside(kind, xi, tol):
 
 
 @njit(cache=True)
-def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out):
-    """Reference coordinates of each point in its given cell, and whether it lies inside.
-
-    affine_Jinv: per-cell inverse Jacobians of affine cells, or an array of shape (0, d, d)
-    for general Q1 cells (Newton). Points with cells[p] < 0 are reported as outside."""
+def _pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out, lo, hi):
     d = x.shape[1]
     nv = cell_nodes.shape[1]
     N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
-    for p in range(x.shape[0]):
+    for p in range(lo, hi):
         c = cells[p]
         if c < 0:
             inside_out[p] = False
@@ -146,17 +145,29 @@ def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_ou
         inside_out[p] = ok and _inside(kind, xi_out[p], INSIDE_TOL)
 
 
-@njit(cache=True)
-def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
-                      affine_Jinv, cells_out, xi_out):
-    """O(1) location on a structured grid of boxes (rectangles or boxes split into cells).
+@njit(parallel=PRANGE, cache=True)
+def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out):
+    """Reference coordinates of each point in its given cell, and whether it lies inside.
 
-    The box index is found by arithmetic, then the (at most 6) cells of that box are tested.
-    Points outside every local box get cell -1. D: tuple of length gdim (compile-time)."""
+    affine_Jinv: per-cell inverse Jacobians of affine cells, or an array of shape (0, d, d)
+    for general Q1 cells (Newton). Points with cells[p] < 0 are reported as outside."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out,
+                          0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out, lo, hi)
+
+
+@njit(cache=True)
+def _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+                       affine_Jinv, cells_out, xi_out, lo, hi):
     d = len(D)
     nv = cell_nodes.shape[1]
     N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
-    for p in range(x.shape[0]):
+    for p in range(lo, hi):
         flat = 0
         stride = 1
         ok = True
@@ -196,22 +207,34 @@ def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, 
                 break
 
 
-@njit(cache=True)
-def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
-              nodes_out, N_out, dN_out):
-    """Standard MPM shape functions: the Lagrange basis of the particle's cell at the particle.
+@njit(parallel=PRANGE, cache=True)
+def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+                      affine_Jinv, cells_out, xi_out):
+    """O(1) location on a structured grid of boxes (rectangles or boxes split into cells).
 
-    nodes_out[p, a] = node index, N_out[p, a] = N_a(x_p), dN_out[p, a, :] = grad N_a(x_p).
-    D: tuple of length gdim (compile-time dimension). Simplices use their constant gradients;
-    Q1 cells use the per-cell inverse Jacobian when they are parallelograms (affine_Jinv with
-    one entry per cell), else the Jacobian at the point."""
+    The box index is found by arithmetic, then the (at most 6) cells of that box are tested.
+    Points outside every local box get cell -1. D: tuple of length gdim (compile-time)."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes,
+                                  node_x, affine_Jinv, cells_out, xi_out, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+                           affine_Jinv, cells_out, xi_out, lo, hi)
+
+
+@njit(cache=True)
+def _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
+               nodes_out, N_out, dN_out, lo, hi):
     d = len(D)
     nv = cell_nodes.shape[1]
     Nq = np.empty(nv)
     dNq = np.empty((nv, d))
     J = np.empty((d, d))
     Jinv = np.empty((d, d))
-    for p in range(cells.shape[0]):
+    for p in range(lo, hi):
         c = cells[p]
         for a in range(nv):
             nodes_out[p, a] = cell_nodes[c, a]
@@ -247,6 +270,26 @@ def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
                 for j in range(d):
                     s += dNq[a, j] * Jinv[j, k]
                 dN_out[p, a, k] = s
+
+
+@njit(parallel=PRANGE, cache=True)
+def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
+              nodes_out, N_out, dN_out):
+    """Standard MPM shape functions: the Lagrange basis of the particle's cell at the particle.
+
+    nodes_out[p, a] = node index, N_out[p, a] = N_a(x_p), dN_out[p, a, :] = grad N_a(x_p).
+    D: tuple of length gdim (compile-time dimension). Simplices use their constant gradients;
+    Q1 cells use the per-cell inverse Jacobian when they are parallelograms (affine_Jinv with
+    one entry per cell), else the Jacobian at the point."""
+    n = cells.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
+                          nodes_out, N_out, dN_out, 0, n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
+                   nodes_out, N_out, dN_out, lo, hi)
 
 
 @njit(cache=True)
