@@ -157,14 +157,16 @@ def p2g_bodies(D, nodes, N, dN, body, mass, v, m_b, mv_b, gm_b):
 
 
 @njit(cache=True)
-def p2g_positions_bodies(D, nodes, N, body, mass, x, V, xm_b, rm_b):
+def p2g_positions_bodies(D, nodes, N, body, mass, x, V, axis_r, xm_b, rm_b):
     """xm_b[i, b] += N m_p x_p and rm_b[i, b] += N m_p V_p^(1/d) / 2 (p in body b): with
     m_b, the body's mass-weighted nodal position and particle half-size (gap check between
-    deformable bodies)."""
+    deformable bodies). axis_r: V_p is per radian (axisymmetric grid), the half-size is
+    that of the meridian area V_p / r_p (as in surface_extents)."""
     d = len(D)
     for p in range(nodes.shape[0]):
         b = body[p]
-        r = 0.5 * V[p] ** (1.0 / d)
+        vol = V[p] / x[p, 0] if axis_r else V[p]
+        r = 0.5 * vol ** (1.0 / d)
         for a in range(nodes.shape[1]):
             i = nodes[p, a]
             w = N[p, a] * mass[p]
@@ -677,7 +679,8 @@ class ExplicitContact:
             return
         self._gap = self.gap * grid.h
         self._xm_b, self._rm_b = np.zeros((nn, nb, d)), np.zeros((nn, nb))
-        p2g_positions_bodies(grid.D, sim.nodes, sim.N, body, p.mass, p.x, p.V, self._xm_b, self._rm_b)
+        p2g_positions_bodies(grid.D, sim.nodes, sim.N, body, p.mass, p.x, p.V, grid.axisymmetric,
+                             self._xm_b, self._rm_b)
         self._acc(grid, self._xm_b, self._rm_b)
         if not self.rigid:
             return
