@@ -71,7 +71,7 @@ def mean_speed(sim):
     return loc[0] / loc[1]
 
 
-def build(h, dt, fbar=False):
+def build(h, dt, fbar=False, shape="auto"):
     """The L3 scene: (sim, soil). Symmetric full column centred on x = 0."""
     nx = int(round(2 * HALF_SPAN / h))
     ny = int(round((H + 2 * h) / h))
@@ -82,7 +82,8 @@ def build(h, dt, fbar=False):
     pts = fm.Particles.fill(grid, soil, per_cell=3,
                             region=lambda x: (np.abs(x[:, 0]) < W / 2) & (x[:, 1] < H))
     k0_stress(pts, gravity=G, surface=lambda x: np.full(len(x), H))   # K0 = nu / (1 - nu)
-    sim = fm.Simulation(grid, pts, fm.Explicit("MUSL"), dt=dt, gravity=(0.0, -G), fbar=fbar)
+    sim = fm.Simulation(grid, pts, fm.Explicit("MUSL"), dt=dt, gravity=(0.0, -G), fbar=fbar,
+                        shape=shape)
     sim.add_friction(lambda x: np.abs(x[:, 1]) < 1e-9 * h, mu=MU, normal=(0.0, -1.0))
     return sim, soil
 
@@ -120,12 +121,14 @@ def main(argv=None):
     parser.add_argument("--out", default="results/column_collapse", help="output directory")
     parser.add_argument("--quick", action="store_true", help="coarse grid (a few seconds)")
     parser.add_argument("--fbar", action="store_true", help="Simulation(fbar=True) (F-bar)")
+    parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
+                        "'auto': the standard family for this plastic soil)")
     args = parser.parse_args(argv)
     h, dt, t_max = (0.8, 2e-3, 2.0) if args.quick else (0.4, 1e-3, 4.0)
     if comm.rank == 0:
         os.makedirs(args.out, exist_ok=True)
 
-    sim, soil = build(h, dt, fbar=args.fbar)
+    sim, soil = build(h, dt, fbar=args.fbar, shape=args.shape)
     p = sim.particles
     mass0 = comm.allreduce(float(np.sum(p.mass)))
     n0 = p.n_global()

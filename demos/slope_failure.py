@@ -69,7 +69,7 @@ def surface(x):
     return BASE + SLOPE_H * np.clip((x - X_TOE) / RUN, 0.0, 1.0)
 
 
-def build(factor, cells, dt_cfl=0.5, t_ramp=8.0, fbar=False):
+def build(factor, cells, dt_cfl=0.5, t_ramp=8.0, fbar=False, shape="auto"):
     """The slope at strength-reduction factor `factor` on a grid of `cells` = (nx, ny)."""
     nx, ny = cells
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [L, HEIGHT]], [nx, ny],
@@ -78,7 +78,8 @@ def build(factor, cells, dt_cfl=0.5, t_ramp=8.0, fbar=False):
     soil = fm.MohrCoulomb(E=E, nu=NU, density=RHO, phi=PHI, c=C, psi=PSI).reduced(factor)
     pts = fm.Particles.fill(grid, soil, per_cell=3, region=lambda x: x[:, 1] < surface(x[:, 0]))
     sim = fm.Simulation(grid, pts, fm.Explicit("MUSL"), dt="auto", cfl=dt_cfl,
-                        gravity=(0.0, -G), gravity_ramp=2.0 * t_ramp, fbar=fbar)
+                        gravity=(0.0, -G), gravity_ramp=2.0 * t_ramp, fbar=fbar,
+                        shape=shape)
     tol = 1e-6 * L
     sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - L) < tol), [0])
     sim.fix(lambda x: np.abs(x[:, 1]) < tol, [1])
@@ -92,9 +93,9 @@ def mean_speed(sim):
     return loc[0] / loc[1]
 
 
-def run_factor(factor, cells, t_ramp, t_hold, keep=False, fbar=False):
+def run_factor(factor, cells, t_ramp, t_hold, keep=False, fbar=False, shape="auto"):
     """One strength-reduction run. Returns a dict (same on every rank)."""
-    sim, soil = build(factor, cells, t_ramp=t_ramp, fbar=fbar)
+    sim, soil = build(factor, cells, t_ramp=t_ramp, fbar=fbar, shape=shape)
     crest = sim.probe((X_CREST, BASE + SLOPE_H), ["displacement"])
     hist = [(0.0, 0.0)]
     sim.observe(lambda s: hist.append((s.t, mean_speed(s))), every=5)
@@ -162,6 +163,8 @@ def main(argv=None):
     parser.add_argument("--out", default="results/slope_failure", help="output directory")
     parser.add_argument("--quick", action="store_true", help="coarse grid, wide bracket")
     parser.add_argument("--fbar", action="store_true", help="Simulation(fbar=True) (F-bar)")
+    parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
+                        "'auto': the standard family for this plastic soil)")
     args = parser.parse_args(argv)
     if args.quick:
         cells, t_ramp, t_hold, f_lo, tol = (20, 11), 6.0, 6.0, 0.5, 0.25
@@ -170,19 +173,19 @@ def main(argv=None):
     if comm.rank == 0:
         os.makedirs(args.out, exist_ok=True)
     t0 = time.perf_counter()
-    base = run_factor(1.0, cells, t_ramp, t_hold, keep=True, fbar=args.fbar)
+    base = run_factor(1.0, cells, t_ramp, t_hold, keep=True, fbar=args.fbar, shape=args.shape)
     runs = [base]
     if base["failed"]:                   # F_s < 1: bracket it in [f_lo, 1]
-        lo_run = run_factor(f_lo, cells, t_ramp, t_hold, fbar=args.fbar)
+        lo_run = run_factor(f_lo, cells, t_ramp, t_hold, fbar=args.fbar, shape=args.shape)
         runs.append(lo_run)
         lo, hi, ok = f_lo, 1.0, not lo_run["failed"]
     else:                                # F_s > 1: bracket it in [1, F_HI]
-        hi_run = run_factor(F_HI, cells, t_ramp, t_hold, fbar=args.fbar)
+        hi_run = run_factor(F_HI, cells, t_ramp, t_hold, fbar=args.fbar, shape=args.shape)
         runs.append(hi_run)
         lo, hi, ok = 1.0, F_HI, hi_run["failed"]
     while ok and hi - lo > tol + 1e-12:
         mid = 0.5 * (lo + hi)
-        r = run_factor(mid, cells, t_ramp, t_hold, fbar=args.fbar)
+        r = run_factor(mid, cells, t_ramp, t_hold, fbar=args.fbar, shape=args.shape)
         runs.append(r)
         if r["failed"]:
             hi = mid
