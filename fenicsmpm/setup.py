@@ -143,8 +143,7 @@ class SetupMixin:
         face re-enters through the other. shape="mpm" only (with shape="auto" the simulation
         switches to it, logged). Returns the PeriodicTie."""
         from .boundaries.periodic import PeriodicTie
-        if self.shape != "mpm" and self.shape_auto and self.step_count == 0:
-            self._use_standard_shape("periodic sides support the standard family only")
+        self._use_standard_shape("periodic sides support the standard family only")
         if self.shape != "mpm":
             raise NotImplementedError(f"set_periodic: shape={self.shape!r}; periodic sides "
                                       f"support shape='mpm' only")
@@ -195,9 +194,8 @@ class SetupMixin:
             if self.axisymmetric:
                 raise NotImplementedError("add_boundary: particle-layer boundaries are not "
                                           "implemented on axisymmetric grids; use a mesh boundary")
-            if self.shape != "mpm" and self.shape_auto and self.step_count == 0:
-                self._use_standard_shape("particle-layer boundaries absorb best with the standard "
-                                         "family (W3 reflection 8 % with cpGIMP)")
+            self._use_standard_shape("particle-layer boundaries absorb best with the standard "
+                                     "family (W3 reflection 8 % with cpGIMP)")
             boundary.attach(self.particles)
             self.layers.append(boundary)
             self._layer_version = None
@@ -266,14 +264,18 @@ class SetupMixin:
         return [m for m, u in zip(p.materials, used) if u] or list(p.materials)
 
     def _use_standard_shape(self, reason):
-        """shape="auto" falls back to the standard family before the first step (logged)."""
+        """shape="auto" falls back to the standard family before the first step (logged);
+        nothing otherwise (a family asked for by name, or a run under way)."""
+        if self.shape == "mpm" or not self.shape_auto or self.step_count:
+            return
         import logging
         self.shape, self.shape_reason, self._wide = "mpm", reason, None
         self._n_alloc = -1
         if self.comm.rank == 0:
             logging.getLogger("fenicsmpm").info("shape='auto': mpm (%s)", reason)
 
-    def _check_options(self, on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp, force_integration):
+    def _check_options(self, on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp, force_integration,
+                       fbar):
         """Check and store the options of Simulation() (see there)."""
         if on_leave not in LEAVE_POLICIES:
             raise ValueError(f"Simulation: 'on_leave' must be one of {LEAVE_POLICIES}, got {on_leave!r}")
@@ -299,3 +301,9 @@ class SetupMixin:
                                       f"force_integration={force_integration!r}")
         if shape not in SHAPES:
             raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
+        if fbar not in (True, False):
+            raise ValueError(f"Simulation: 'fbar' must be True or False, got {fbar!r}")
+        if fbar and not self.integrator.explicit:
+            raise NotImplementedError("Simulation: fbar=True needs an explicit integrator (the "
+                                      "implicit tangent of F-bar is not implemented)")
+        self.fbar = bool(fbar)

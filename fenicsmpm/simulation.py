@@ -119,13 +119,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                            guards=0.0, assembly=0.0, ksp=0.0)
         self.axisymmetric = grid.axisymmetric
         self._field = np.zeros(0, dtype=np.int32)
-        self._check_options(on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp, force_integration)
-        if fbar not in (True, False):
-            raise ValueError(f"Simulation: 'fbar' must be True or False, got {fbar!r}")
-        if fbar and not integrator.explicit:
-            raise NotImplementedError("Simulation: fbar=True needs an explicit integrator (the "
-                                      "implicit tangent of F-bar is not implemented)")
-        self.fbar = bool(fbar)
+        self._check_options(on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp,
+                            force_integration, fbar)
         self.removed_mass = 0.0
         self.removed_count = 0
         self.base_motion = None                      # boundaries.base_motion.RigidBase (relative frame)

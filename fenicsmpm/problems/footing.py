@@ -18,10 +18,10 @@ PRANDTL = 2.0 + np.pi
 
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
                   shape="auto", fbar=None, comm=None):
-    """The scene: (sim, pressure, settlement), pressure() -> q / ((2 + pi) c_u) of the last
-    step and settlement(t) the footing's prescribed settlement [m] (both collective-free
-    for settlement, collective for pressure). fbar: the Simulation option (None: the
-    library default)."""
+    """The scene: (sim, pressure, settlement): pressure() -> q / ((2 + pi) c_u) of the last
+    step (from the global contact force; the same on every rank), settlement(t) the
+    footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
+    default)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
@@ -35,7 +35,7 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     pts = pts + fm.Particles.fill(grid, fm.LinearElastic(E=10e6, nu=0.3, density=1800.0),
                                   per_cell=2, region=lambda x: (x[:, 0] < B2) & (x[:, 1] > depth)
                                   & (x[:, 1] < depth + 2 * h))
-    speed = speed_factor * np.sqrt(soil.G / 1800.0)
+    speed = speed_factor * soil.s_wave_speed
     ramp = 0.25 * h / speed
 
     def velocity(t):
