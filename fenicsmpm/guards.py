@@ -17,7 +17,7 @@ FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
 
 
 @njit(cache=True)
-def _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, lo, hi):
+def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, lo, hi):
     n_bad = 0
     d = x.shape[1]
     for p in range(lo, hi):
@@ -39,6 +39,12 @@ def _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, lo, hi):
                 code = 5
             elif V[p] < vol_tol * V0[p]:
                 code = 6
+        if code == 0:
+            s = 0.0
+            for k in range(d):
+                s += a[p, k] * a[p, k]
+            if s > a_lim2:
+                code = 7
         bad_out[p] = code
         if code:
             n_bad += 1
@@ -46,28 +52,37 @@ def _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, lo, hi):
 
 
 @njit(parallel=PRANGE, cache=True)
-def _scan(x, v, stress, F, V, V0, inverted, vol_tol, bad_out):
+def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out):
     """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0, or an
-    increment the commit refused: `inverted`), 6 (volume below vol_tol V0). An inversion is
+    increment the commit refused: `inverted`), 6 (volume below vol_tol V0), 7 (|a|^2 > a_lim2:
+    a velocity jump of more than a cell per step in one step, the start of a blow-up). An
+    inversion is
     reported first: it is the cause of any non-finite value that follows it. Returns the
     number of bad particles (threaded over particle chunks, kernels.threads)."""
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, 0, n)
+        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, 0, n)
     bad = np.zeros(nc, dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        bad[c] = _scan_range(x, v, stress, F, V, V0, inverted, vol_tol, bad_out, lo, hi)
+        bad[c] = _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out,
+                              lo, hi)
     return bad.sum()
 
 
 def check_particles(sim, vol_tol=1e-6):
     """Raise FloatingPointError (non-finite state) or RuntimeError (inverted or collapsed
-    particles) naming step, time, field and the first offending particles."""
+    particles, or a blow-up: a particle of an explicit run whose velocity changed by more than
+    h / dt in one step, |a_p| dt > h / dt, a kick that would move it a further cell per step;
+    smooth motion, impacts and free fall change a particle's velocity by a fraction of that)
+    naming step, time, field and the first offending particles; for a blow-up also their
+    speed, velocity jump, stress and volume ratio det F, and the likely causes."""
     p = sim.particles
     bad = np.empty(len(p), dtype=np.int8)
-    n_bad = _scan(p.x, p.v, p.stress, p.F, p.V, p.V0, sim._inverted, vol_tol, bad)
+    a_lim = sim.grid.h / sim.dt ** 2 if sim.integrator.explicit else np.inf
+    n_bad = _scan(p.x, p.v, p.a, p.stress, p.F, p.V, p.V0, sim._inverted, vol_tol, a_lim * a_lim,
+                  bad)
     sim._inverted[:] = 0
     if sim.comm.size > 1:
         n_bad = sim.comm.allreduce(n_bad)
@@ -75,16 +90,29 @@ def check_particles(sim, vol_tol=1e-6):
         return
     idx = np.flatnonzero(bad)
     idx = idx[np.argsort(bad[idx] != 5, kind="stable")][:5]       # inversions first
-    local = [(int(bad[i] != 5), int(p.id[i]), tuple(np.round(p.x[i], 6)), int(bad[i])) for i in idx]
+    local = [(int(bad[i] != 5), int(p.id[i]), tuple(np.round(p.x[i], 6)), int(bad[i]),
+              float(np.linalg.norm(p.v[i])), float(np.abs(p.stress[i]).max()),
+              float(det3(p.F[i])), float(np.linalg.norm(p.a[i]) * sim.dt)) for i in idx]
     everyone = sim.comm.allgather(local) if sim.comm.size > 1 else [local]
     first = [r[1:] for r in sorted(r for part in everyone for r in part)]
     code = first[0][2]
     first = [r for r in first if r[2] == code][:5]
     what = (f"non-finite {FIELD_NAMES[code - 1]}" if code <= 4 else
             "inverted particle (det F <= 0)" if code == 5 else
-            f"collapsed particle volume (V < {vol_tol:g} V0)")
+            f"collapsed particle volume (V < {vol_tol:g} V0)" if code == 6 else
+            f"blow-up: particle velocity jumped by more than h / dt = {sim.grid.h / sim.dt:.4g} "
+            f"m/s in one step")
     msg = (f"step {sim.step_count}, t = {sim.t:.6g}: {what} in {n_bad} particle(s); first ids "
            f"{[r[0] for r in first]} at {[r[1] for r in first]}")
+    if code == 7:
+        msg += (f"; their velocity jump {[float(f'{r[6]:.4g}') for r in first]} m/s, |v| "
+                f"{[float(f'{r[3]:.4g}') for r in first]} m/s, max |stress| "
+                f"{[float(f'{r[4]:.4g}') for r in first]} Pa, det F "
+                f"{[float(f'{r[5]:.4g}') for r in first]}. Likely causes: a stress spike in a "
+                f"particle whose volume grew far (det F >> 1) and is compacted again, loading "
+                f"nodes of little mass; a load or gravity that accelerates the material past "
+                f"h / dt; a stiffness or density beyond the one dt='auto' was set from; too "
+                f"large a dt (lower cfl)")
     raise (FloatingPointError if code <= 4 else RuntimeError)(msg)
 
 

@@ -34,3 +34,21 @@ def test_guards_pass_on_a_healthy_run():
     sim, _ = colliding_discs(fm.Newmark())
     sim.run(steps=3)
     assert sim.step_count == 3
+
+
+def test_blow_up_is_stopped_at_its_start_with_speed_stress_and_volume():
+    """Issue 21 item 4: an explicit particle whose velocity jumped by more than h / dt in one
+    step (a kick of more than a cell per step) stops the run at once, naming it with its jump,
+    speed, stress and det F, before it leaves the mesh or inverts others."""
+    from fenicsmpm.guards import check_particles
+    sim, _ = colliding_discs(fm.Explicit("MUSL"))
+    sim.run(steps=2)
+    check_particles(sim)                           # healthy
+    p = sim.particles
+    hit = np.flatnonzero(p.id == 5)
+    jump = 1.5 * sim.grid.h / sim.dt
+    p.a[hit] = [jump / sim.dt, 0.0]
+    with pytest.raises(RuntimeError, match=r"step 2, .*blow-up: particle velocity jumped by more "
+                                           r"than h / dt = .* in 1 particle\(s\); first ids \[5\]"
+                                           r".*their velocity jump \[\d.*det F \[\d.*Likely causes"):
+        check_particles(sim)

@@ -169,7 +169,7 @@ def test_return_satisfies_yield(case):
     s0, dF = _random_states(4000, seed=1, strain=3e-3)
     s0 = _elastic_start(mat, s0)
     dF = dF[:len(s0)]
-    st0 = np.zeros((len(s0), 2))
+    st0 = np.zeros((len(s0), mat.n_state))
     sig, st = _run(mat, dF, s0, st0)
     kinds = _classify(_predictor(mat, dF, s0), sig)
     counts = dict(zip(*np.unique(kinds, return_counts=True)))
@@ -197,7 +197,7 @@ def test_psi_zero_no_plastic_volume_change():
         mat = fm.MohrCoulomb(E=E, nu=NU, density=RHO, phi=30.0, c=10e3, psi=psi)
         s0m = _elastic_start(mat, s0)
         dFm = dF[:len(s0m)]
-        sig, st = _run(mat, dFm, s0m, np.zeros((len(s0m), 2)))
+        sig, st = _run(mat, dFm, s0m, np.zeros((len(s0m), mat.n_state)))
         tr_ = _predictor(mat, dFm, s0m)
         kinds = _classify(tr_, sig)
         sel = (kinds == "plane") | (kinds == "edge")
@@ -236,7 +236,8 @@ def test_mc_consistent_tangent(case, kind):
     s0, dF = _random_states(2000, seed=3)
     s0 = _elastic_start(mat, s0)
     dF = dF[:len(s0)]
-    st0 = np.full((len(s0), 2), [0.01, 0.0]) if mat.eta > 0 else np.zeros((len(s0), 2))
+    st0 = np.zeros((len(s0), mat.n_state))
+    st0[:, 0] = 0.01 if mat.eta > 0 else 0.0
     sig, _ = _run(mat, dF, s0, st0)
     rows = np.flatnonzero(_classify(_predictor(mat, dF, s0), sig) == kind)[:8]
     assert len(rows) >= 3
@@ -377,3 +378,32 @@ def test_mohr_coulomb_block_under_gravity_migrates_history():
     moved = comm.allreduce(len(set(p.id.tolist()) - ids0))
     if comm.size > 1:
         assert moved > 0, "no particle changed rank: migration of the history is not exercised"
+
+
+@pytest.mark.parametrize("c", [0.0, 2e3])
+def test_opened_gap_closes_without_stress(c):
+    """Issue 21 item 4: a Mohr-Coulomb particle pulled apart beyond its strength (the apex)
+    stores the opening as the gap g (state column 2) and carries the apex stress while it
+    recompacts by up to g; only compaction beyond g is elastic: p = p_apex - K (eps - g),
+    K = lambda + 2 mu / 3, exact to round-off.  (Without the gap the same compaction gave
+    p = -K eps: a loose particle that had stretched to J = 38 loaded its nodes with 38 times
+    its volume and blew the granular collapse up.)"""
+    mat = fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=30.0, c=c)
+    apex = c / np.tan(np.radians(30.0))
+    K = mat.lame_lambda + 2.0 * mat.shear_modulus / 3.0
+    sig = np.zeros((1, 3, 3))
+    st = np.zeros((1, mat.n_state))
+    iso = lambda e: (1.0 + e / 3.0) * np.eye(3)[None]
+    for _ in range(10):                          # open by 10 x 1e-3 (volumetric)
+        sig, st = _run(mat, iso(1e-3), sig, st)
+    assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
+    g = st[0, 2]
+    assert 0.0095 < g <= 0.01                   # the opening beyond the elastic tension
+    for _ in range(9):                           # close by 9e-3 < g: stress stays at the apex
+        sig, st = _run(mat, iso(-1e-3), sig, st)
+        assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
+    assert st[0, 2] == pytest.approx(g - 9e-3, abs=1e-15)
+    sig, st = _run(mat, iso(-2e-3), sig, st)     # closes g, then compacts elastically
+    assert st[0, 2] == 0.0
+    p = np.trace(sig[0]) / 3.0
+    assert p == pytest.approx(apex - K * (2e-3 - (g - 9e-3)), rel=1e-12)

@@ -61,7 +61,7 @@ def test_mohr_coulomb_without_softening_is_unchanged():
     n = 200
     kw = dict(E=20e6, nu=0.3, density=2000.0, phi=30.0, c=5e3, psi=5.0, tension_cutoff=1e3)
     loc, nl = fm.MohrCoulomb(**kw), fm.MohrCoulomb(**kw, nonlocal_length=0.1)
-    assert (loc.n_state, nl.n_state, nl.nonlocal_column) == (2, 3, 2)
+    assert (loc.n_state, nl.n_state, nl.nonlocal_column) == (3, 4, 3)
     dF = np.eye(3) + 3e-3 * rng.standard_normal((n, 3, 3))
     dF[:, 2, :] = dF[:, :, 2] = 0.0
     dF[:, 2, 2] = 1.0

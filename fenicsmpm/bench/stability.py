@@ -77,7 +77,7 @@ NEWMARK_DT_FACTOR = 5.0
 COLLAPSE = dict(height=1.0, width=0.2, E=1.0e5, nu=0.25, density=1000.0, flip=0.0, cfl=0.5,
                 ramp_transits=20.0, hold_transits=10.0)
 COLLAPSE_LOAD = 30.0
-COLLAPSE_OVERLOAD = 200.0       # particles are pushed through the fixed base: the guard stops
+COLLAPSE_OVERLOAD = 200.0       # the squeezed bottom row blows up: the guard stops it
 COLLAPSE_INVERSION = 300.0      # a neo-Hookean particle inverts within ~10 steps
 IMPACT_SPEED_FACTOR = 10.0
 IMPACT_T_END = 0.6

@@ -27,6 +27,18 @@ from ..kernels import transfer as kt
 
 SCHEMES = ("USF", "USL", "MUSL", "AVG")
 TRANSFERS = ("apic", "flip")
+PLASTIC_FLIP = 0.99     # the default FLIP fraction when a material flows plastically
+
+
+def default_flip(materials):
+    """The FLIP fraction `flip=None` resolves to: 1 (pure FLIP) for elastic scenes, PLASTIC_FLIP
+    when a material flows plastically (`plastic = True`: Mohr-Coulomb, von Mises,
+    Hypoplastic). Decided by data (issue 21, `python -m fenicsmpm.bench granular-collapse`):
+    on a rough base pure FLIP keeps particle-velocity noise that the held base nodes cannot
+    see, so a granular collapse never comes to rest and runs out 26-120 % beyond Lube et al.'s
+    law; with 1 % PIC every aspect ratio 0.5-4 stops by 3.8 T and runs out within 18 %. Elastic
+    scenes keep pure FLIP: there the blend would damp the waves (bench transfer)."""
+    return PLASTIC_FLIP if any(getattr(m, "plastic", False) for m in materials) else 1.0
 
 
 class Explicit:
@@ -40,7 +52,8 @@ class Explicit:
 
     def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None):
         """scheme: one of SCHEMES; transfer: "apic" or "flip" (default "flip"); flip: the FLIP
-        fraction of transfer="flip" (default 1).
+        fraction of transfer="flip" (default None: `default_flip` of the scene's materials,
+        1 for elastic scenes, PLASTIC_FLIP = 0.99 where a material flows plastically).
 
         displacement: None, or u(x, t) -> (n, gdim) for prescribed motion: the fixed dofs
         (sim.fix) move with the velocity (u(x, t + dt) - u(x, t)) / dt in the step (x the node
@@ -60,12 +73,16 @@ class Explicit:
         if flip is not None and transfer != "flip":
             raise ValueError(f"Explicit: 'flip' applies to transfer='flip' only, got "
                              f"transfer={transfer!r} and flip={flip!r}")
+        self._flip_auto = flip is None and transfer == "flip"
         flip = 1.0 if flip is None else flip
-        if not (isinstance(flip, (int, float, np.floating)) and 0.0 <= flip <= 1.0):
+        if isinstance(flip, bool) or not (isinstance(flip, (int, float, np.floating))
+                                          and 0.0 <= flip <= 1.0):
             raise ValueError(f"Explicit: 'flip' must be in [0, 1], got {flip!r}")
         self.scheme, self.flip, self.transfer = scheme, float(flip), transfer
 
     def setup(self, sim):
+        if self._flip_auto:
+            self.flip = default_flip(sim.particles.materials)
         if self.transfer == "apic":
             sim.particles.add_field("apic_C", (sim.gdim, sim.gdim))
 

@@ -26,9 +26,20 @@ Eigenvectors are unchanged by the return.  The consistent tangent is
 assembled with the spectral derivative (off-diagonal eigenbasis terms
 (sigma_i - sigma_j) / (sigma_tr_i - sigma_tr_j)) and chained with the Jaumann elastic predictor.
 
+Separation (issue 21 item 4): the plastic volumetric strain of returns to the apex and to the
+tension cut-off is the material coming apart (a granular front thinning into loose grains). It
+is kept as a gap g >= 0, and later compaction closes the gap before it strains the skeleton:
+    close = min(g, -tr eps) when tr eps < 0,   eps <- eps + close / 3 I,   g <- g - close,
+so a particle pulled apart to many times its volume stays at the apex stress until it is back
+at the volume where it separated, instead of reloading its nodes with the stress of the whole
+compaction times its inflated volume (the granular collapse blew up this way,
+problems.granular_collapse).  The consistent tangent ignores the gap (an implicit Newton step
+closing a gap sees the elastic tangent).
+
 History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
                          1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p),
-                         2 = with nonlocal_length, A = (1 - m) eps_d^p + m <eps_d^p> of the
+                         2 = g (the open gap, above),
+                         3 = with nonlocal_length, A = (1 - m) eps_d^p + m <eps_d^p> of the
                              step start, from which phi and c follow within the step
                              (materials.regularisation, _frozen).
 """
@@ -190,7 +201,8 @@ def _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl, Amat, B
 @numba.njit(cache=True)
 def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
     """Principal-space return of s_tr (ascending) from history kap_n; writes sig and
-    A = d sig / d s_tr (3 x 3); returns (plastic, d eps_d^p, d eps_v^p).
+    A = d sig / d s_tr (3 x 3); returns (plastic, d eps_d^p, d eps_v^p, opening), opening
+    the part of d eps_v^p from the apex and the tension cut-off (the material separating).
     W (22 x 3) and M (3 x 4) are work arrays."""
     phi, dphi = _soft(par[0], par[1], par[4], kap_n)
     c, dc = _soft(par[2], par[3], par[4], kap_n)
@@ -204,7 +216,7 @@ def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
         sig[i] = s_tr[i]
     scale = max(abs(s_tr[0]), abs(s_tr[2]), c, 1e-300)
     if f0 <= 0.0 and s_tr[2] <= st:
-        return False, 0.0, 0.0
+        return False, 0.0, 0.0, 0.0
     dl, X, col, ep = W[9], W[10], W[11], W[12]
     Amat, Bmat, J = W[13:16], W[16:19], W[19:22]
     tol = 1e-10 * scale
@@ -240,9 +252,13 @@ def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
             for i in range(3):
                 A[i, j] += lam * tr + 2.0 * mu * ep[i]
         epv = 0.0
+        opening = 0.0
         for q in range(m):
-            epv += dl[q] * (Bmat[0, q] + Bmat[1, q] + Bmat[2, q])
-        return True, kappa - kap_n, epv
+            dv = dl[q] * (Bmat[0, q] + Bmat[1, q] + Bmat[2, q])
+            epv += dv
+            if _SETS[sid, q] >= 3:              # a tension cut-off plane
+                opening += dv
+        return True, kappa - kap_n, epv, opening
     # apex: sigma_i = c cot(phi), d kappa = sqrt(2/3) |dev s_tr| / (2 mu)
     pm = (s_tr[0] + s_tr[1] + s_tr[2]) / 3.0
     nd = math.sqrt((s_tr[0] - pm) ** 2 + (s_tr[1] - pm) ** 2 + (s_tr[2] - pm) ** 2)
@@ -257,18 +273,22 @@ def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
         sig[i] = pa
         for j in range(3):
             A[i, j] = dpa * _SQ23 / (2.0 * mu) * (s_tr[j] - pm) / nd if nd > 1e-300 else 0.0
-    return True, dk, 3.0 * (pm - pa) / (3.0 * lam + 2.0 * mu)
+    dv = 3.0 * (pm - pa) / (3.0 * lam + 2.0 * mu)
+    return True, dk, dv, max(dv, 0.0)
 
 
 @numba.njit(cache=True)
-def _trial(p, dF, sigma_old, lam, mu, S):
-    """Jaumann elastic predictor S = sigma_old + omega sigma_old - sigma_old omega + C : eps."""
-    tr = dF[p, 0, 0] + dF[p, 1, 1] + dF[p, 2, 2] - 3.0
+def _trial(p, dF, sigma_old, lam, mu, S, close=0.0):
+    """Jaumann elastic predictor S = sigma_old + omega sigma_old - sigma_old omega + C : eps,
+    eps = sym(dF - I) + close / 3 I (close >= 0: compaction taken up by an open gap)."""
+    tr = dF[p, 0, 0] + dF[p, 1, 1] + dF[p, 2, 2] - 3.0 + close
     for i in range(3):
         for j in range(3):
             hij = dF[p, i, j] - (1.0 if i == j else 0.0)
             hji = dF[p, j, i] - (1.0 if i == j else 0.0)
             v = sigma_old[p, i, j] + mu * (hij + hji) + (lam * tr if i == j else 0.0)
+            if i == j:
+                v += 2.0 * mu * close / 3.0
             for m in range(3):
                 v += (0.5 * (dF[p, i, m] - dF[p, m, i]) * sigma_old[p, m, j]
                       - sigma_old[p, i, m] * 0.5 * (dF[p, m, j] - dF[p, j, m]))
@@ -326,9 +346,11 @@ def _frozen(state, p, nl, mf, par, out):
 
 @numba.njit(cache=True)
 def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf):
-    """sigma_new = principal return of the Jaumann predictor; state[:, 0:2] += (d eps_d^p,
-    d eps_v^p).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians; nl: see
-    _frozen."""
+    """sigma_new = principal return of the Jaumann predictor; state[:, 0:3] += (d eps_d^p,
+    d eps_v^p, d g).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians; nl:
+    see _frozen.  The gap g = state[:, 2] >= 0 (module docstring) takes up compaction first:
+    close = min(g, -tr eps) when tr eps < 0, and grows by the opening of apex and cut-off
+    returns."""
     pf = np.empty(5)
     S = np.empty((3, 3))
     sig = np.empty(3)
@@ -338,7 +360,11 @@ def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, pa
     w0 = np.empty(3)
     for q in range(idx.shape[0]):
         p = idx[q]
-        _trial(p, dF, sigma_old, lam, mu, S)
+        close = 0.0
+        if state[p, 2] > 0.0:
+            close = min(state[p, 2], max(0.0, 3.0 - dF[p, 0, 0] - dF[p, 1, 1] - dF[p, 2, 2]))
+            state[p, 2] -= close
+        _trial(p, dF, sigma_old, lam, mu, S, close)
         kap, pp = _frozen(state, p, nl, mf, par, pf)
         if _clearly_elastic(S, kap, pp, st, w0):
             for i in range(3):
@@ -346,7 +372,7 @@ def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, pa
                     sigma_new[p, i, j] = S[i, j]
             continue
         w, V = np.linalg.eigh(S)
-        plastic, dk, dv = _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M)
+        plastic, dk, dv, opening = _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M)
         if not plastic:
             for i in range(3):
                 for j in range(3):
@@ -358,6 +384,7 @@ def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, pa
                                       + V[i, 2] * sig[2] * V[j, 2])
         state[p, 0] += dk
         state[p, 1] += dv
+        state[p, 2] += opening
 
 
 @numba.njit(cache=True)
@@ -448,18 +475,18 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
         eta >= 0 (softening rate; 0 = perfectly plastic);
         nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: phi and c follow the
         over-nonlocal average of eps_d^p (materials.regularisation).
-    History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p, with nonlocal_length
-    state[:, 2] = A (module docstring).
+    History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p, state[:, 2] = the gap g, with
+    nonlocal_length state[:, 3] = A (module docstring).
     """
 
     name = "MohrCoulomb"
-    n_state = 2
+    n_state = 3
 
     def __init__(self, E, nu, density, phi, c, psi=0.0, tension_cutoff=None, phi_res=None,
                  c_res=None, eta=0.0, nonlocal_length=None, nonlocal_m=2.0):
         owner = type(self).__name__
         self._set_parameters(E, nu, density)
-        self._set_nonlocal(nonlocal_length, nonlocal_m, 2)
+        self._set_nonlocal(nonlocal_length, nonlocal_m, 3)
         self._phi = _check_range(owner, "phi", phi, 0.0, 90.0, hi_open=True, what=" degrees")
         self._c = check_real(owner, "c", c)
         if self._c < 0.0:
