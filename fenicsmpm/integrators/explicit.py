@@ -19,11 +19,14 @@ Velocity transfer (`transfer`):
             gives the nodes m_p (v_p + C_p (x_i - x_p)), so an affine velocity field (a rigid
             rotation) is transferred exactly; per-particle field `apic_C` (migrates, and is
             checkpointed)."""
+import logging
 import time
 
 import numpy as np
 
 from ..kernels import transfer as kt
+
+_log = logging.getLogger("fenicsmpm")
 
 SCHEMES = ("USF", "USL", "MUSL", "AVG")
 TRANSFERS = ("apic", "flip")
@@ -83,6 +86,9 @@ class Explicit:
     def setup(self, sim):
         if self._flip_auto:
             self.flip = default_flip(sim.particles.materials)
+            if self.flip != 1.0 and sim.comm.rank == 0:
+                _log.info("Explicit(flip=None): flip = %g (a material flows plastically; "
+                          "pass flip=1.0 for pure FLIP)", self.flip)
         if self.transfer == "apic":
             sim.particles.add_field("apic_C", (sim.gdim, sim.gdim))
 

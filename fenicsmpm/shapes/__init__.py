@@ -17,9 +17,10 @@ def choose_shape(sim):
     family where a wide one is not available or measured worse: implicit integrators (the
     wide-stencil implicit assembly is several times slower), force_integration="mixed",
     plastic materials (`plastic` set: MohrCoulomb, VonMises, Hypoplastic; with cpGIMP the L4
-    slope's strength-reduction factor at failure was 0.65 against 0.39-0.44 with the standard
-    family and about 0.46 from the seed's phi > 35 deg threshold, the jacked pile's
-    resistance 50 kN against 24 kN and an estimate of 7 kN, and the L3 collapse did not stop),
+    slope's strength-reduction factor at failure is 0.625-0.672 against 0.531-0.578 with the
+    standard family, 0.49 from the infinite slope and about 0.46 from the seed's phi > 35 deg
+    threshold (with pure FLIP: 0.65 against 0.39-0.44, the L3 collapse did not stop), and the
+    jacked pile's resistance 50 kN against 24 kN and an estimate of 7 kN),
     3D unstructured meshes (no tetrahedral CPDI yet). Under MPI a mesh without the vertex
     ghost layer gets it (Grid.ensure_vertex_ring, called by the Simulation). Collective."""
     from .gimp import lattice
@@ -31,7 +32,8 @@ def choose_shape(sim):
     plastic = sorted({type(m).__name__ for m in sim.particles.materials if getattr(m, "plastic", False)})
     if plastic:
         return "mpm", (f"plastic material ({', '.join(plastic)}): failure loads come out higher "
-                       f"with the wide families (L4 slope F_s 0.65 with cpGIMP, 0.39-0.44 standard)")
+                       f"with the wide families (L4 slope F_s 0.63-0.67 with cpGIMP, "
+                       f"0.53-0.58 standard, infinite slope 0.49)")
     try:
         lattice(grid)
         return "cpgimp", "structured axis-aligned grid"
