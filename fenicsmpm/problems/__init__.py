@@ -12,4 +12,5 @@ solution and error measures, shared by the tests, the demos and the benchmark su
     rotating_disc      a rigidly spinning elastic disc (angular momentum)
     localisation       softening shear layer and strip footing (regularisation)
     footing            Prandtl's smooth strip footing on Tresca soil (F-bar)
+    granular_collapse  dry granular column on a rough base against Lube et al.'s (2005) laws
 """
