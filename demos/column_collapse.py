@@ -64,14 +64,6 @@ STOP_RUNOUT = 1e-3         # [m] motion stopped: runout growth within a 0.1 s ch
 EVERY = 10                 # mean speed sampled every EVERY steps
 
 
-def mean_speed(sim):
-    """Mass-weighted mean speed (seed 002 eq 5.12), global (collective)."""
-    p = sim.particles
-    loc = np.array([np.sum(np.linalg.norm(p.v, axis=1) * p.mass), np.sum(p.mass)])
-    comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
-    return loc[0] / loc[1]
-
-
 def build(h, dt, fbar=False, shape="auto"):
     """The L3 scene: (sim, soil). Symmetric full column centred on x = 0."""
     nx = int(round(2 * HALF_SPAN / h))
@@ -133,11 +125,11 @@ def main(argv=None):
     p = sim.particles
     mass0 = comm.allreduce(float(np.sum(p.mass)))
     n0 = p.n_global()
-    hist = [(0.0, mean_speed(sim))]
+    hist = [(0.0, p.mean_speed())]
     det_min = [np.inf]
 
     def observe(s):
-        hist.append((s.t, mean_speed(s)))
+        hist.append((s.t, s.particles.mean_speed()))
         d = np.linalg.det(s.particles.F[:, :2, :2]) if len(s.particles) else np.array([np.inf])
         det_min[0] = min(det_min[0], comm.allreduce(float(d.min()), op=MPI.MIN))
 

@@ -86,19 +86,12 @@ def build(factor, cells, dt_cfl=0.5, t_ramp=8.0, fbar=False, shape="auto"):
     return sim, soil
 
 
-def mean_speed(sim):
-    p = sim.particles
-    loc = np.array([np.sum(np.linalg.norm(p.v, axis=1) * p.mass), np.sum(p.mass)])
-    comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
-    return loc[0] / loc[1]
-
-
 def run_factor(factor, cells, t_ramp, t_hold, keep=False, fbar=False, shape="auto"):
     """One strength-reduction run. Returns a dict (same on every rank)."""
     sim, soil = build(factor, cells, t_ramp=t_ramp, fbar=fbar, shape=shape)
     crest = sim.probe((X_CREST, BASE + SLOPE_H), ["displacement"])
     hist = [(0.0, 0.0)]
-    sim.observe(lambda s: hist.append((s.t, mean_speed(s))), every=5)
+    sim.observe(lambda s: hist.append((s.t, s.particles.mean_speed())), every=5)
     t0 = time.perf_counter()
     sim.run(t_end=t_ramp + t_hold)
     wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)

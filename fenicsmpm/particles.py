@@ -233,6 +233,13 @@ class Particles:
         """Global kinetic energy sum m v.v / 2 (collective)."""
         return float(self.total(0.5 * self.mass * np.einsum("pi,pi->p", self.v, self.v)))
 
+    def mean_speed(self):
+        """Global mass-weighted mean speed sum |v_p| m_p / sum m_p (seed 002 eq 5.12), the
+        run-out diagnostic of collapses and slopes (collective)."""
+        speed = np.linalg.norm(self.v, axis=1)
+        s = self.total(np.column_stack([speed * self.mass, self.mass]))
+        return float(s[0] / s[1])
+
     def strain_energy(self):
         """Global accumulated stress work (strain energy) of the particles (collective)."""
         return float(self.total(self.work))

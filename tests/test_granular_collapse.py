@@ -50,3 +50,12 @@ def test_runout_and_height_follow_lube(column):
     r = column
     assert abs(r["runout_error"]) < RUNOUT_TOL, r["runout"]
     assert abs(r["height_error"]) < HEIGHT_TOL, r["height"]
+
+
+def test_mean_speed_is_the_mass_weighted_global_mean():
+    """Particles.mean_speed (seed 002 eq 5.12), collective: sum |v| m / sum m over all ranks."""
+    sim, _, _ = granular_column(1.0, cells=4)
+    p = sim.particles
+    p.v[:] = [3.0, 4.0]                          # |v| = 5 everywhere
+    p.v[p.id % 2 == 0] = 0.0                     # half the particles (equal masses) at rest
+    assert p.mean_speed() == pytest.approx(2.5, rel=1e-14)

@@ -53,14 +53,6 @@ SIZES = dict(full=dict(collapse=dict(h=0.4, dt=1e-3, t_end=2.5),
                         slope=dict(cells=(20, 11), t_end=8.0)))
 
 
-def _mean_speed(sim, comm):
-    from mpi4py import MPI
-    p = sim.particles
-    loc = np.array([np.sum(np.linalg.norm(p.v, axis=1) * p.mass), np.sum(p.mass)])
-    comm.Allreduce(MPI.IN_PLACE, loc, op=MPI.SUM)
-    return float(loc[0] / loc[1])
-
-
 def _gmin(comm, x):
     return common.gmin(comm, float(x))
 
@@ -164,7 +156,7 @@ def run_scene(scene, kind, size, comm, t_end=None):
                    runout=runout, t_reached=float(sim.t),
                    completed=int(error is None and sim.t >= t_end - 1e-9),
                    max_plastic_strain=_gmax(comm, p.state[:, 0].max() if len(p) else 0.0),
-                   mean_speed_final=_mean_speed(sim, comm), finite=int(finite))
+                   mean_speed_final=sim.particles.mean_speed(), finite=int(finite))
     if crest_u is not None:
         metrics["crest_u"] = crest_u
     config = dict(integrator="Explicit" if explicit else "Newmark",

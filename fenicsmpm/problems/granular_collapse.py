@@ -75,16 +75,11 @@ def collapse(a, cells=16, t_max=8.0, chunk=0.25, comm=None, **scene):
     def gmax(x):
         return comm.allreduce(float(np.max(x)) if len(x) else -np.inf, op=MPI.MAX)
 
-    def mean_speed():
-        s = comm.allreduce(np.array([np.sum(np.linalg.norm(p.v, axis=1) * p.mass),
-                                     np.sum(p.mass)]))
-        return s[0] / s[1]
-
     hist, front, error, t_rest = [(0.0, 0.0)], L0, None, float("nan")
     try:
         while sim.t < t_max * T - 1e-9:
             sim.run(t_end=min(sim.t + chunk * T, t_max * T), progress=False)
-            hist.append((sim.t / T, mean_speed()))
+            hist.append((sim.t / T, p.mean_speed()))
             new = gmax(p.x[:, 0])
             speeds = [s for _, s in hist]
             if (np.argmax(speeds) < len(speeds) - 1 and new - front < 5e-3 * L0
