@@ -62,7 +62,7 @@ def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out):
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, 0, n)
+        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, np.int64(0), n)
     bad = np.zeros(nc, dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)

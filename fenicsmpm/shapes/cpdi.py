@@ -53,7 +53,7 @@ def cpdi1_corners(x, F, r0, corners_out):
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _cpdi1_corners(x, F, r0, corners_out, 0, n)
+        return _cpdi1_corners(x, F, r0, corners_out, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _cpdi1_corners(x, F, r0, corners_out, lo, hi)
@@ -103,7 +103,7 @@ def corner_weights(corners, w_out, g_out):
     n = corners.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _corner_weights(corners, w_out, g_out, 0, n)
+        return _corner_weights(corners, w_out, g_out, np.int64(0), n)
     vmin = np.empty(nc)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
@@ -156,7 +156,7 @@ def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
     n = cnodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, 0, n)
+        return _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, hi)
@@ -179,7 +179,7 @@ def move_corners(D, cnodes, cN, du, corners):
     n = corners.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _move_corners(D, cnodes, cN, du, corners, 0, n)
+        return _move_corners(D, cnodes, cN, du, corners, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _move_corners(D, cnodes, cN, du, corners, lo, hi)

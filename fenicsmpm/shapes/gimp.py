@@ -154,7 +154,7 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
     nc = particle_chunks(n)
     if nc == 1:
         return _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns,
-                     0, n, nodes_out, N_out, dN_out, count_out)
+                     np.int64(0), n, nodes_out, N_out, dN_out, count_out)
     bad = np.empty(nc, dtype=np.int64)
     for c in prange(nc):
         p0, p1 = chunk(n, nc, c)

@@ -155,7 +155,7 @@ def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_ou
     nc = particle_chunks(n)
     if nc == 1:
         return _pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out,
-                          0, n)
+                          np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_out, lo, hi)
@@ -218,7 +218,7 @@ def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, 
     nc = particle_chunks(n)
     if nc == 1:
         return _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes,
-                                  node_x, affine_Jinv, cells_out, xi_out, 0, n)
+                                  node_x, affine_Jinv, cells_out, xi_out, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
@@ -285,7 +285,7 @@ def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
     nc = particle_chunks(n)
     if nc == 1:
         return _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
-                          nodes_out, N_out, dN_out, 0, n)
+                          nodes_out, N_out, dN_out, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
