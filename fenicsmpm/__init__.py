@@ -14,7 +14,8 @@ Who owns which stage of a step (DESIGN.md; the integrator puts them in order):
     P2G            kernels/transfer (+ kernels/axisymmetric hoop terms), boundaries/ (loads)
     grid solve     integrators/ (explicit, implicit, generalized_alpha, dmgc), contact/
     G2P            kernels/transfer, kernels/smoothing
-    constitutive   materials/ (Simulation.trial_stress / commit)
+    constitutive   materials/ (Simulation.stress_update: trial_stress / commit, or for one
+                   linear-elastic body the fused pass of kernels/fused)
     relocate       particles, migration, splitting; guards (checks after the step)
     time loop      simulation (Simulation.step/run); set-up API in setup, energy monitor in
                    energy, checkpoint/restart in checkpoint; Probe, Output and writers in io/

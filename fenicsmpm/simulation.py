@@ -23,6 +23,8 @@ from .kernels.smoothing import smoothed_stress
 from .materials.regularisation import regularise
 from .setup import SetupMixin
 from .kernels.fbar import fbar
+from .kernels.fused import elastic_step
+from .materials.linear_elastic import LinearElastic
 from .shapes import choose_shape, resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
@@ -126,6 +128,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.base_motion = None                      # boundaries.base_motion.RigidBase (relative frame)
         self._work = None                            # local [external, boundary] work (monitor)
         self._n_alloc = -1
+        self._scratch = {}                           # per-particle work arrays (_per_particle)
         self._all = np.zeros(0, dtype=np.int64)
         self._inverted = np.zeros(0, dtype=np.int8)  # flagged by commit, reported by the guards
         self.shape_auto = shape == "auto"
@@ -230,8 +233,6 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                 self.nodes = np.empty((n, nv), dtype=np.int32)
                 self.N = np.empty((n, nv))
                 self.dN = np.empty((n, nv, self.gdim))
-            self._dF = np.empty((n, 3, 3))
-            self._sigma_new = np.empty((n, 3, 3))
             self._state_new = np.empty_like(p.state)
             self._n_alloc = n
         if self._wide is None:
@@ -385,13 +386,57 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.timers["constitutive"] += time.perf_counter() - t0
         return self._sigma_new
 
+    def _per_particle(self, name, shape):
+        """A float64 work array (n_particles,) + shape, kept between steps, allocated at first
+        use (contents undefined)."""
+        a = self._scratch.get(name)
+        if a is None or len(a) != len(self.particles):
+            a = self._scratch[name] = np.empty((len(self.particles),) + shape)
+        return a
+
+    @property
+    def _dF(self):
+        """The step's incremental deformation gradients (n, 3, 3) (the fused elastic pass of
+        stress_update needs none)."""
+        return self._per_particle("dF", (3, 3))
+
+    @property
+    def _sigma_new(self):
+        """The trial stresses (n, 3, 3) of trial_stress."""
+        return self._per_particle("sigma_new", (3, 3))
+
+    def _inversion_flags(self):
+        """The per-particle flags of inverted increments (set by the commit, read by guards)."""
+        if len(self._inverted) != len(self.particles):
+            self._inverted = np.zeros(len(self.particles), dtype=np.int8)
+        return self._inverted
+
+    def stress_update(self, w, scale):
+        """The stress update of an explicit step for the nodal field w (a velocity, scale = dt;
+        or a displacement, scale = 1): dF = I + scale sum_i w_i (x) grad N_ip (incremental_F),
+        the materials' stress (trial_stress) and commit. For a body of one LinearElastic
+        material without F-bar, axisymmetry or splitting the three run as one fused particle
+        pass (kernels.fused.elastic_step: the same result to the bit)."""
+        p = self.particles
+        mat = p.materials[0]
+        if (len(p.materials) > 1 or type(mat) is not LinearElastic or self.fbar
+                or self.axisymmetric or self.splitting is not None):
+            t0 = time.perf_counter()
+            self.incremental_F(w, scale, self._dF)
+            self.timers["constitutive"] += time.perf_counter() - t0
+            self.trial_stress(self._dF)
+            self.commit(self._dF)
+            return
+        t0 = time.perf_counter()
+        elastic_step(self.grid.D, self.nodes, self.dN, w, scale, mat.lame_lambda,
+                     mat.shear_modulus, p.F, p.V, p.stress, p.work, self._inversion_flags())
+        self.timers["constitutive"] += time.perf_counter() - t0
+
     def commit(self, dF):
         """Accept dF, the trial stress and history: update F, V, stress, state and stress work."""
         p = self.particles
         t0 = time.perf_counter()
-        if len(self._inverted) != len(p):
-            self._inverted = np.zeros(len(p), dtype=np.int8)
-        kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work, self._inverted)
+        kt.commit_step(dF, p.F, p.V, p.stress, self._sigma_new, p.work, self._inversion_flags())
         if self.splitting is not None:
             self.splitting.push_forward(self, dF)
         if p.state.shape[1]:

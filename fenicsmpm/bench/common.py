@@ -505,7 +505,8 @@ def particle_bytes(sim):
     work arrays), summed over ranks."""
     p = sim.particles
     arrays = [getattr(p, name) for name in p.field_names()]
-    arrays += [getattr(sim, a) for a in ("nodes", "N", "dN", "_dF", "_sigma_new")
+    arrays += [getattr(sim, a) for a in ("nodes", "N", "dN")
                if isinstance(getattr(sim, a, None), np.ndarray)]
+    arrays += list(sim._scratch.values())
     b = int(sum(a.nbytes for a in arrays))
     return sim.comm.allreduce(b) if sim.comm.size > 1 else b

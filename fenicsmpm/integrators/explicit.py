@@ -137,14 +137,6 @@ class Explicit:
         for b, g in zip(sim.frictions, self._gaps):
             b.hold(v, g, dt)
 
-    def _stress_update(self, sim, v_grid, dt):
-        dF = sim._dF
-        t0 = time.perf_counter()
-        sim.incremental_F(v_grid, dt, dF)
-        sim.timers["constitutive"] += time.perf_counter() - t0
-        sim.trial_stress(dF)
-        sim.commit(dF)
-
     def step(self, sim, dt):
         """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T = sim.particles, sim.grid, sim.timers
@@ -167,7 +159,7 @@ class Explicit:
             self._hold(sim, v0, dt)
         T["solve"] += time.perf_counter() - t0
         if self.scheme in ("USF", "AVG"):
-            self._stress_update(sim, v0, dt if self.scheme == "USF" else 0.5 * dt)
+            sim.stress_update(v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
         sim.internal_force(sim.dynamic_stress(p.stress), f)
@@ -208,7 +200,7 @@ class Explicit:
             self._hold(sim, v1, dt)
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
-            self._stress_update(sim, v1, dt if self.scheme != "AVG" else 0.5 * dt)
+            sim.stress_update(v1, dt if self.scheme != "AVG" else 0.5 * dt)
         if sim.robin is not None:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction)

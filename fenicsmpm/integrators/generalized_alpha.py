@@ -216,10 +216,7 @@ class ExplicitGeneralizedAlpha:
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
-        sim.incremental_F(du, 1.0, sim._dF)
-        T["constitutive"] += time.perf_counter() - t3
-        sim.trial_stress(sim._dF)
-        sim.commit(sim._dF)
+        sim.stress_update(du, 1.0)
         if sim.robin is not None:
             sim.robin_u += du
         sim.nodal = dict(mass=m, velocity=v1, active=active)

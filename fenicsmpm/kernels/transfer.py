@@ -38,7 +38,7 @@ def p2g_mass(nodes, N, mass, m_out):
 def _p2g_mass_chunks(nc, nodes, N, mass, m_out, mb):
     n = nodes.shape[0]
     if nc == 1:
-        return _mass(nodes, N, mass, 0, n, m_out)
+        return _mass(nodes, N, mass, np.int64(0), n, m_out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
@@ -75,7 +75,7 @@ def p2g_mass_momentum(D, nodes, N, mass, v, m_out, mv_out):
 def _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, mb, mvb):
     n = nodes.shape[0]
     if nc == 1:
-        return _mass_momentum(D, nodes, N, mass, v, 0, n, m_out, mv_out)
+        return _mass_momentum(D, nodes, N, mass, v, np.int64(0), n, m_out, mv_out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
@@ -111,7 +111,7 @@ def p2g_weighted(D, nodes, N, mass, q, out):
 def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, buf):
     n = nodes.shape[0]
     if nc == 1:
-        return _weighted(D, nodes, N, mass, q, 0, n, out)
+        return _weighted(D, nodes, N, mass, q, np.int64(0), n, out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
@@ -150,7 +150,7 @@ def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
 def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
     n = nodes.shape[0]
     if nc == 1:
-        return _force(D, nodes, N, dN, mass, V, stress, g, 0, n, out)
+        return _force(D, nodes, N, dN, mass, V, stress, g, np.int64(0), n, out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
@@ -195,7 +195,7 @@ def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out,
                        mvb):
     n = nodes.shape[0]
     if nc == 1:
-        return _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, 0, n, m_out, mv_out)
+        return _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, np.int64(0), n, m_out, mv_out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
@@ -250,7 +250,7 @@ def restrict_gradients(D, nodes, N, dN, active, field):
     n = nodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _restrict(D, nodes, N, dN, active, field, 0, n)
+        return _restrict(D, nodes, N, dN, active, field, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _restrict(D, nodes, N, dN, active, field, lo, hi)
@@ -277,25 +277,32 @@ def flip_blend(D, nodes, N, old, new, flip, q):
     n = nodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _flip_blend(D, nodes, N, old, new, flip, q, 0, n)
+        return _flip_blend(D, nodes, N, old, new, flip, q, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _flip_blend(D, nodes, N, old, new, flip, q, lo, hi)
 
 
 @njit(cache=True)
-def _incremental_F(D, nodes, dN, w, scale, lo, hi, dF_out):
+def particle_dF(D, nodes, dN, w, scale, p, out):
+    """out = I + scale * sum_a w_(nodes[p, a]) (x) grad N_a(x_p) for particle p (3x3 out; plane
+    strain in 2D)."""
     d = len(D)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = 1.0 if i == j else 0.0
+    for a in range(nodes.shape[1]):
+        n = nodes[p, a]
+        for i in range(d):
+            wi = scale * w[n, i]
+            for j in range(d):
+                out[i, j] += wi * dN[p, a, j]
+
+
+@njit(cache=True)
+def _incremental_F(D, nodes, dN, w, scale, lo, hi, dF_out):
     for p in range(lo, hi):
-        for i in range(3):
-            for j in range(3):
-                dF_out[p, i, j] = 1.0 if i == j else 0.0
-        for a in range(nodes.shape[1]):
-            n = nodes[p, a]
-            for i in range(d):
-                wi = scale * w[n, i]
-                for j in range(d):
-                    dF_out[p, i, j] += wi * dN[p, a, j]
+        particle_dF(D, nodes, dN, w, scale, p, dF_out[p])
 
 
 @njit(parallel=PRANGE, cache=True)
@@ -307,7 +314,7 @@ def incremental_F(D, nodes, dN, w, scale, dF_out):
     n = nodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _incremental_F(D, nodes, dN, w, scale, 0, n, dF_out)
+        return _incremental_F(D, nodes, dN, w, scale, np.int64(0), n, dF_out)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _incremental_F(D, nodes, dN, w, scale, lo, hi, dF_out)
@@ -341,7 +348,7 @@ def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
     n = nodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, 0, n)
+        return _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, lo, hi)
@@ -403,10 +410,35 @@ def g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C):
     n = nodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, 0, n)
+        return _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, lo, hi)
+
+
+@njit(cache=True)
+def inversion_flag(J):
+    """0 for an admissible volume ratio J = det dF, 1 where the increment inverts the particle
+    (J <= 0), 2 where it is not finite."""
+    if J > 0.0 and np.isfinite(J):
+        return 0
+    return 1 if np.isfinite(J) else 2
+
+
+@njit(cache=True)
+def commit_particle(dF, sigma_new, J, p, F, V, sigma, work, tmp):
+    """Accept particle p's step (dF, its stress sigma_new, J = det dF > 0): work += the
+    trapezoidal stress work, V <- J V, F <- dF F, sigma <- sigma_new (tmp: 3x3 scratch)."""
+    V_new = J * V[p]
+    work[p] += work_increment(dF, sigma[p], sigma_new, V[p], V_new)
+    V[p] = V_new
+    for i in range(3):
+        for j in range(3):
+            tmp[i, j] = dF[i, 0] * F[p, 0, j] + dF[i, 1] * F[p, 1, j] + dF[i, 2] * F[p, 2, j]
+    for i in range(3):
+        for j in range(3):
+            F[p, i, j] = tmp[i, j]
+            sigma[p, i, j] = sigma_new[i, j]
 
 
 @njit(cache=True)
@@ -415,20 +447,12 @@ def _commit(dF, F, V, sigma, sigma_new, work, inverted, lo, hi):
     n_bad = 0
     for p in range(lo, hi):
         J = det3(dF[p])
-        if not (J > 0.0) or not np.isfinite(J):
-            inverted[p] = 1 if np.isfinite(J) else 2
+        flag = inversion_flag(J)
+        if flag:
+            inverted[p] = flag
             n_bad += 1
             continue
-        V_new = J * V[p]
-        work[p] += work_increment(dF[p], sigma[p], sigma_new[p], V[p], V_new)
-        V[p] = V_new
-        for i in range(3):
-            for j in range(3):
-                tmp[i, j] = dF[p, i, 0] * F[p, 0, j] + dF[p, i, 1] * F[p, 1, j] + dF[p, i, 2] * F[p, 2, j]
-        for i in range(3):
-            for j in range(3):
-                F[p, i, j] = tmp[i, j]
-                sigma[p, i, j] = sigma_new[p, i, j]
+        commit_particle(dF[p], sigma_new[p], J, p, F, V, sigma, work, tmp)
     return n_bad
 
 
@@ -442,7 +466,7 @@ def commit_step(dF, F, V, sigma, sigma_new, work, inverted):
     n = dF.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _commit(dF, F, V, sigma, sigma_new, work, inverted, 0, n)
+        return _commit(dF, F, V, sigma, sigma_new, work, inverted, np.int64(0), n)
     bad = np.zeros(nc, dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)

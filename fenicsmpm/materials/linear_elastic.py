@@ -19,7 +19,7 @@ import numpy as np
 from .validation import check_open_interval, check_positive
 from ..kernels.threads import PRANGE, chunk, particle_chunks
 
-__all__ = ["LinearElastic", "IsotropicElasticParameters", "jaumann_tangent",
+__all__ = ["LinearElastic", "IsotropicElasticParameters", "jaumann_tangent", "jaumann_update",
            "linear_elastic_stress_kernel", "linear_elastic_tangent_kernel"]
 
 
@@ -96,26 +96,33 @@ class IsotropicElasticParameters:
 
 
 @numba.njit(cache=True)
+def jaumann_update(dF, s_old, lam, mu, s_new, eps, om):
+    """One particle (3x3 arrays): s_new = s_old + lam tr(eps) I + 2 mu eps + om s_old - s_old om,
+    eps = sym(dF - I), om = skew(dF - I) (eps, om: 3x3 scratch)."""
+    for i in range(3):
+        for j in range(3):
+            hij = dF[i, j] - (1.0 if i == j else 0.0)
+            hji = dF[j, i] - (1.0 if i == j else 0.0)
+            eps[i, j] = 0.5 * (hij + hji)
+            om[i, j] = 0.5 * (hij - hji)
+    tr = eps[0, 0] + eps[1, 1] + eps[2, 2]
+    for i in range(3):
+        for j in range(3):
+            s = s_old[i, j] + 2.0 * mu * eps[i, j]
+            if i == j:
+                s += lam * tr
+            for m in range(3):
+                s += om[i, m] * s_old[m, j] - s_old[i, m] * om[m, j]
+            s_new[i, j] = s
+
+
+@numba.njit(cache=True)
 def _stress(idx, dF, sigma_old, sigma_new, lam, mu, lo, hi):
     eps = np.empty((3, 3))
     om = np.empty((3, 3))
     for q in range(lo, hi):
         p = idx[q]
-        for i in range(3):
-            for j in range(3):
-                hij = dF[p, i, j] - (1.0 if i == j else 0.0)
-                hji = dF[p, j, i] - (1.0 if i == j else 0.0)
-                eps[i, j] = 0.5 * (hij + hji)
-                om[i, j] = 0.5 * (hij - hji)
-        tr = eps[0, 0] + eps[1, 1] + eps[2, 2]
-        for i in range(3):
-            for j in range(3):
-                s = sigma_old[p, i, j] + 2.0 * mu * eps[i, j]
-                if i == j:
-                    s += lam * tr
-                for m in range(3):
-                    s += om[i, m] * sigma_old[p, m, j] - sigma_old[p, i, m] * om[m, j]
-                sigma_new[p, i, j] = s
+        jaumann_update(dF[p], sigma_old[p], lam, mu, sigma_new[p], eps, om)
 
 
 @numba.njit(parallel=PRANGE, cache=True)
@@ -125,7 +132,7 @@ def linear_elastic_stress_kernel(idx, dF, sigma_old, sigma_new, lam, mu):
     n = idx.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _stress(idx, dF, sigma_old, sigma_new, lam, mu, 0, n)
+        return _stress(idx, dF, sigma_old, sigma_new, lam, mu, np.int64(0), n)
     for c in numba.prange(nc):
         lo, hi = chunk(n, nc, c)
         _stress(idx, dF, sigma_old, sigma_new, lam, mu, lo, hi)

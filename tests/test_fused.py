@@ -1,0 +1,85 @@
+"""Fused particle passes (kernels.fused; issue 16): the one-pass linear-elastic stress update
+gives the same bits as the three passes it replaces (incremental_F, the Jaumann stress,
+commit_step), per kernel and over whole explicit runs (MUSL, USF, AVG, explicit
+generalized-alpha), serial and under mpirun -n 2 (there to round-off in global sums: two meshes built in one
+process may be partitioned differently)."""
+import numpy as np
+import pytest
+
+import fenicsmpm as fm
+from fenicsmpm.kernels import transfer as kt
+from fenicsmpm.kernels.fused import elastic_step
+from fenicsmpm.materials.linear_elastic import linear_elastic_stress_kernel
+
+
+def _random_particles(rng, n, n_nodes, nv, d):
+    nodes = rng.integers(0, n_nodes, size=(n, nv)).astype(np.int32)
+    dN = rng.standard_normal((n, nv, d))
+    w = 0.05 * rng.standard_normal((n_nodes, d))
+    F = np.tile(np.eye(3), (n, 1, 1)) + 0.1 * rng.standard_normal((n, 3, 3))
+    V = rng.uniform(0.5, 1.5, n)
+    sigma = rng.standard_normal((n, 3, 3))
+    sigma = 0.5 * (sigma + sigma.transpose(0, 2, 1))
+    return nodes, dN, w, F, V, sigma, rng.standard_normal(n)
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_elastic_step_is_bit_identical_to_the_three_passes(d):
+    rng = np.random.default_rng(7)
+    n, n_nodes, nv = 500, 60, 2 ** d
+    nodes, dN, w, F, V, sigma, work = _random_particles(rng, n, n_nodes, nv, d)
+    w[nodes[3]] *= 200.0                       # some increments invert particles
+    D = (0,) * d
+    lam, mu = 3.0e6, 2.0e6
+    # three passes
+    dF = np.empty((n, 3, 3))
+    kt.incremental_F(D, nodes, dN, w, 0.7, dF)
+    s_new = np.empty((n, 3, 3))
+    linear_elastic_stress_kernel(np.arange(n), dF, sigma, s_new, lam, mu)
+    F1, V1, s1, w1, inv1 = F.copy(), V.copy(), sigma.copy(), work.copy(), np.zeros(n, np.int8)
+    bad1 = kt.commit_step(dF, F1, V1, s1, s_new, w1, inv1)
+    # one pass
+    F2, V2, s2, w2, inv2 = F.copy(), V.copy(), sigma.copy(), work.copy(), np.zeros(n, np.int8)
+    bad2 = elastic_step(D, nodes, dN, w, 0.7, lam, mu, F2, V2, s2, w2, inv2)
+    assert bad1 == bad2 > 0
+    for a, b in ((F1, F2), (V1, V2), (s1, s2), (w1, w2), (inv1, inv2)):
+        assert np.array_equal(a, b)
+
+
+class _Unfused(fm.LinearElastic):
+    """A LinearElastic that Simulation.stress_update does not fuse (the three-pass path)."""
+
+
+def _run(material, integrator, shape):
+    from dolfinx import mesh
+    from mpi4py import MPI
+    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [2, 1]], [16, 8],
+                                         mesh.CellType.quadrilateral))
+    p = fm.Particles.fill(grid, material, per_cell=2, region=lambda x: x[:, 1] < 0.6)
+    p.v[:, 0] = 0.3 * np.sin(np.pi * p.x[:, 0])
+    sim = fm.Simulation(grid, p, integrator, dt="auto", gravity=(0.0, -9.81), shape=shape)
+    sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
+    sim.run(steps=60)
+    q = sim.particles
+    return sim, {k: getattr(q, k).copy() for k in ("x", "u", "v", "stress", "F", "V", "work")}
+
+
+@pytest.mark.parametrize("integrator,shape", [
+    (lambda: fm.Explicit("MUSL"), "auto"), (lambda: fm.Explicit("USF"), "mpm"),
+    (lambda: fm.Explicit("AVG"), "mpm"), (lambda: fm.ExplicitGeneralizedAlpha(), "mpm")])
+def test_simulation_uses_the_fused_pass_with_the_same_result(integrator, shape):
+    from mpi4py import MPI
+    kw = dict(E=1e6, nu=0.3, density=1000.0)
+    sim_f, fused = _run(fm.LinearElastic(**kw), integrator(), shape)
+    sim_p, plain = _run(_Unfused(**kw), integrator(), shape)
+    assert "dF" not in sim_f._scratch and "dF" in sim_p._scratch     # which path ran
+    comm = sim_f.comm
+    for k in fused:
+        if comm.size == 1:
+            assert np.array_equal(fused[k], plain[k]), k
+        else:       # the two meshes may be partitioned differently: compare global sums
+            sums = [comm.allreduce(np.array([a.sum(), (a * a).sum()])) for a in (fused[k], plain[k])]
+            assert np.allclose(sums[0], sums[1], rtol=1e-12, atol=0.0), (k, sums)
+    moved = comm.allreduce(float(np.abs(fused["u"]).max()) if len(fused["u"]) else 0.0,
+                                 op=MPI.MAX)
+    assert moved > 1e-4            # the scene did move (the comparison is not trivially true)
