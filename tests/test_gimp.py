@@ -97,6 +97,25 @@ def test_partition_of_unity_and_affine(cell_type, shape, rng):
     assert width <= expected
 
 
+def test_more_nodes_than_the_last_step_are_all_kept(rng):
+    """GimpShape writes into the last step's node columns; a particle that now touches more
+    nodes (here: cpGIMP boxes stretched from L/4 to 0.325 L) makes it evaluate again, wider:
+    partition of unity and sum of gradients stay exact."""
+    grid = structured(MPI.COMM_WORLD, CT.quadrilateral)
+    pts = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2)
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-5, shape="cpgimp")
+    sim.locate_and_shape()
+    before = sim.nodes.shape[1]
+    pts.F[:, 0, 0] = 1.3
+    sim.locate_and_shape()
+    comm = MPI.COMM_WORLD
+    grew = comm.allreduce(int(len(pts) == 0 or sim.nodes.shape[1] > before), op=MPI.MIN)
+    pu = np.abs(sim.N.sum(axis=1) - 1).max() if len(pts) else 0.0
+    gsum = np.abs(sim.dN.sum(axis=1)).max() if len(pts) else 0.0
+    worst = comm.allreduce(max(pu, gsum), op=MPI.MAX)
+    assert grew and worst < 1e-12, (before, sim.nodes.shape, pu, gsum)
+
+
 def soft_column(shape, comm=MPI.COMM_WORLD, n_cells=20, cell_type=CT.quadrilateral):
     """BENCHMARKS L1 soft column, explicit MUSL, seed-002 sine ramp of gravity over T/2,
     held to T. Returns (initial positions X0, sigma_yy) of the local particles."""

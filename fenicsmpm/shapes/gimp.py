@@ -71,42 +71,47 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
     nv = nodes_out.shape[1]
     Sk = np.empty((d, ns))
     dSk = np.empty((d, ns))
-    jk = np.empty((d, ns), dtype=np.int64)
+    off = np.empty((d, ns), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
     idx = np.empty(d, dtype=np.int64)
     bad = -1
     for p in range(p0, p1):
+        stride = 1
         for k in range(d):
             lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
             L = spacing[k]
             j0 = int(np.floor((max(x[p, k] - lp, lo[k]) - origin[k]) / L))
             for q in range(ns):
                 j = j0 + q
-                jk[k, q] = j
+                jl = j - ilo[k]
+                off[k, q] = jl * stride if 0 <= jl < nlat[k] else -1
                 S, dS = weight_1d(x[p, k], lp, origin[k] + j * L, L, lo[k], hi[k])
                 Sk[k, q] = S
                 dSk[k, q] = dS
+            stride *= nlat[k]
         cnt = 0
         pad = -1
         total = 1
         for k in range(d):
             total *= ns
+            idx[k] = 0
         for m in range(total):
-            r = m
+            if m > 0:                       # next multi-index, axis 0 fastest (no divisions)
+                k = 0
+                idx[0] += 1
+                while idx[k] == ns:
+                    idx[k] = 0
+                    k += 1
+                    idx[k] += 1
             w = 1.0
-            for k in range(d):
-                idx[k] = r % ns
-                r //= ns
-                w *= Sk[k, idx[k]]
             flat = 0
-            stride = 1
             node = -1
             inside = True
             for k in range(d):
-                jl = jk[k, idx[k]] - ilo[k]
-                if jl < 0 or jl >= nlat[k]:
+                w *= Sk[k, idx[k]]
+                o = off[k, idx[k]]
+                if o < 0:
                     inside = False
-                flat += jl * stride
-                stride *= nlat[k]
+                flat += o
             if inside:
                 node = table[flat]
             if w == 0.0:
@@ -116,14 +121,15 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
             if node < 0:
                 bad = p
                 continue
-            nodes_out[p, cnt] = node
-            N_out[p, cnt] = w
-            for k in range(d):
-                g = dSk[k, idx[k]]
-                for l in range(d):
-                    if l != k:
-                        g *= Sk[l, idx[l]]
-                dN_out[p, cnt, k] = g
+            if cnt < nv:
+                nodes_out[p, cnt] = node
+                N_out[p, cnt] = w
+                for k in range(d):
+                    g = dSk[k, idx[k]]
+                    for l in range(d):
+                        if l != k:
+                            g *= Sk[l, idx[l]]
+                    dN_out[p, cnt, k] = g
             cnt += 1
         count_out[p] = cnt
         if pad < 0 and cnt > 0:
@@ -134,6 +140,18 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
             for k in range(d):
                 dN_out[p, a, k] = 0.0
     return bad
+
+
+@njit(cache=True)
+def max_half_width(lp0, F, spacing, contiguous):
+    """max over particles and axes of l_pk / L_k, l_pk = lp0_pk |F_kk| (cpGIMP, contiguous) or
+    lp0_pk (uGIMP)."""
+    r = 0.0
+    for p in range(lp0.shape[0]):
+        for k in range(lp0.shape[1]):
+            lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
+            r = max(r, lp / spacing[k])
+    return r
 
 
 @njit(parallel=PRANGE, cache=True)
@@ -148,8 +166,10 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
     -1 where the point is not a local node. ns: nodes per axis looked at, ceil(2 l / L) + 2,
     enough for any box of half-width l.
     Output per particle: the nonzero-weight nodes first (count_out of them), then padding
-    (a valid node with N = dN = 0). Returns -1, or the index of a particle whose box reaches a
-    node that is not local (the caller raises)."""
+    (a valid node with N = dN = 0); a particle with more nonzero-weight nodes than the
+    outputs have columns gets only the first ones written (count_out says how many it has:
+    the caller evaluates again with wider outputs). Returns -1, or the index of a particle
+    whose box reaches a node that is not local (the caller raises)."""
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
@@ -223,6 +243,7 @@ class GimpShape:
         if not hasattr(p, "gimp_l0"):
             p.add_field("gimp_l0", (grid.gdim,))[:] = initial_half_widths(grid, p, self.lat)
         self._buf = None
+        self._nv = 0            # the node columns of the last evaluation (0: none yet)
 
     def before_locate(self, sim):
         """Nothing to move: the box follows x_p (and F for cpGIMP)."""
@@ -232,26 +253,29 @@ class GimpShape:
         touches (padded)."""
         p, lat, d = sim.particles, self.lat, sim.gdim
         n = len(p)
-        if n and self.contiguous:
-            ratio = float(np.max(p.gimp_l0 * np.abs(np.diagonal(p.F, axis1=1, axis2=2)[:, :d])
-                                 / lat["spacing"]))
-        else:
-            ratio = float(np.max(p.gimp_l0 / lat["spacing"])) if n else 0.5
+        ratio = max_half_width(p.gimp_l0, p.F, lat["spacing"], self.contiguous) if n else 0.5
         ns = int(np.ceil(2.0 * ratio)) + 2
         width = ns ** d
-        if self._buf is None or self._buf[0].shape != (n, width):
-            self._buf = (np.empty((n, width), dtype=np.int32), np.empty((n, width)),
-                         np.empty((n, width, d)), np.empty(n, dtype=np.int64))
-        nodes, N, dN, count = self._buf
-        bad = gimp_shape(sim.grid.D, p.x, p.gimp_l0, p.F, self.contiguous, lat["origin"],
-                         lat["spacing"], lat["lo"], lat["hi"], lat["ilo"], lat["nlat"],
-                         lat["table"], ns, nodes, N, dN, count)
+        # columns: the last step's node count (usually still right: no copy), at most width
+        cap = min(self._nv, width) if self._nv else width
+        for _ in range(2):
+            if self._buf is None or self._buf[0].shape != (n, cap):
+                self._buf = (np.empty((n, cap), dtype=np.int32), np.empty((n, cap)),
+                             np.empty((n, cap, d)), np.empty(n, dtype=np.int64))
+            nodes, N, dN, count = self._buf
+            bad = gimp_shape(sim.grid.D, p.x, p.gimp_l0, p.F, self.contiguous, lat["origin"],
+                             lat["spacing"], lat["lo"], lat["hi"], lat["ilo"], lat["nlat"],
+                             lat["table"], ns, nodes, N, dN, count)
+            nv = max(int(count.max()) if n else 1, 1)
+            if nv <= cap:
+                break
+            cap = width                  # a particle touches more nodes than last step
         if bad >= 0:
             raise RuntimeError(f"GIMP: the domain of particle {int(p.id[bad])} at "
                                f"{np.round(p.x[bad], 6).tolist()} reaches grid nodes that are "
                                f"not on this rank; " + _RING_MESSAGE.format(name="GIMP"))
-        nv = max(int(count.max()) if n else 1, 1)
-        if nv == width:
+        self._nv = nv
+        if nv == cap:
             return nodes, N, dN
         return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
                 np.ascontiguousarray(dN[:, :nv]))
