@@ -25,7 +25,6 @@ import time
 import numpy as np
 
 from ..kernels import transfer as kt
-from ..kernels.fused import g2p_remap
 
 _log = logging.getLogger("fenicsmpm")
 
@@ -183,23 +182,17 @@ class Explicit:
             fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
-        remap = self.scheme in ("MUSL", "AVG")
+        x_start = p.x.copy() if self.transfer == "apic" and self.scheme in ("MUSL", "AVG") else p.x
         if self.transfer == "apic":
-            x_start = p.x.copy() if remap else p.x
             kt.g2p_affine(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v1, p.x, p.v, p.u, p.apic_C)
-        elif remap:            # G2P and the remap's P2G in one pass (timed as g2p)
-            mv2 = np.zeros_like(mv)
-            g2p_remap(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u,
-                      p.mass, mv2)
         else:
             kt.g2p(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
-        if remap:
-            if self.transfer == "apic":
-                mv2 = self._p2g(sim, p.v, x_start, False)[1]
+        if self.scheme in ("MUSL", "AVG"):
+            _, mv2 = self._p2g(sim, p.v, x_start, False)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
             if vp is not None:

@@ -91,19 +91,14 @@ def _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, mb, mvb):
 
 
 @njit(cache=True)
-def scatter_weighted(D, nodes, N, mass, q, p, out):
-    """out_i += N_ip m_p q_p for the nodes of particle p."""
-    for a in range(nodes.shape[1]):
-        w = N[p, a] * mass[p]
-        i = nodes[p, a]
-        for k in range(len(D)):
-            out[i, k] += w * q[p, k]
-
-
-@njit(cache=True)
 def _weighted(D, nodes, N, mass, q, lo, hi, out):
+    d = len(D)
     for p in range(lo, hi):
-        scatter_weighted(D, nodes, N, mass, q, p, out)
+        for a in range(nodes.shape[1]):
+            w = N[p, a] * mass[p]
+            i = nodes[p, a]
+            for k in range(d):
+                out[i, k] += w * q[p, k]
 
 
 def p2g_weighted(D, nodes, N, mass, q, out):
@@ -326,27 +321,22 @@ def incremental_F(D, nodes, dN, w, scale, dF_out):
 
 
 @njit(cache=True)
-def g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p):
-    """G2P of particle p (see g2p)."""
-    for k in range(len(D)):
-        dx = 0.0
-        dv = 0.0
-        vp = 0.0
-        for a in range(nodes.shape[1]):
-            i = nodes[p, a]
-            w = N[p, a]
-            dx += w * du[i, k]
-            dv += w * (v_new[i, k] - v_old[i, k])
-            vp += w * v_new[i, k]
-        x[p, k] += dx
-        u[p, k] += dx
-        v[p, k] = flip * (v[p, k] + dv) + (1.0 - flip) * vp
-
-
-@njit(cache=True)
 def _g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u, lo, hi):
+    d = len(D)
     for p in range(lo, hi):
-        g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p)
+        for k in range(d):
+            dx = 0.0
+            dv = 0.0
+            vp = 0.0
+            for a in range(nodes.shape[1]):
+                i = nodes[p, a]
+                w = N[p, a]
+                dx += w * du[i, k]
+                dv += w * (v_new[i, k] - v_old[i, k])
+                vp += w * v_new[i, k]
+            x[p, k] += dx
+            u[p, k] += dx
+            v[p, k] = flip * (v[p, k] + dv) + (1.0 - flip) * vp
 
 
 @njit(parallel=PRANGE, cache=True)
