@@ -1,8 +1,8 @@
 """Fused particle passes (kernels.fused; issue 16): the one-pass linear-elastic stress update
 gives the same bits as the three passes it replaces (incremental_F, the Jaumann stress,
 commit_step), per kernel and over whole explicit runs (MUSL, USF, AVG, explicit
-generalized-alpha), serial and under mpirun -n 2 (there to round-off in global sums: two meshes built in one
-process may be partitioned differently)."""
+generalized-alpha), serial and under mpirun -n 2 (there to round-off in global sums: two
+meshes built in one process may be partitioned differently); the `fused` bench case."""
 import numpy as np
 import pytest
 
@@ -83,3 +83,24 @@ def test_simulation_uses_the_fused_pass_with_the_same_result(integrator, shape):
     moved = comm.allreduce(float(np.abs(fused["u"]).max()) if len(fused["u"]) else 0.0,
                                  op=MPI.MAX)
     assert moved > 1e-4            # the scene did move (the comparison is not trivially true)
+
+
+def test_bench_case_quick(tmp_path_factory):
+    """`python -m fenicsmpm.bench fused --quick`: JSON and PNG, the elastic pass at 4 and 9
+    nodes per particle (timings are recorded, not asserted: shared machine)."""
+    import json
+    import os
+    from mpi4py import MPI
+    from demo_helpers import exist_on_rank0
+    from fenicsmpm import bench
+    comm = MPI.COMM_WORLD
+    out = comm.bcast(str(tmp_path_factory.mktemp("fused")) if comm.rank == 0 else None)
+    doc = bench.get_case("fused")(quick=True, out=out, verbose=False)
+    assert exist_on_rank0(os.path.join(out, "fused.json"), os.path.join(out, "fused.png"))
+    assert sorted(r["name"] for r in doc["runs"]) == ["elastic-nv4", "elastic-nv9"]
+    for r in doc["runs"]:
+        m = r["metrics"]
+        assert m["ms_fused"] > 0 and m["ms_separate"] > 0 and m["speed_up"] > 0
+    if comm.rank == 0:
+        with open(os.path.join(out, "fused.json")) as f:
+            assert json.load(f)["case"] == "fused"
