@@ -36,6 +36,8 @@ PRANGE = ParallelOptions(dict(prange=True, comprehension=False, reduction=False,
 
 MIN_CHUNK = 8192        # particles; below 2 MIN_CHUNK a pass runs serially (a thread
                         # start-up costs ~0.01-1 ms: worth it for passes of >~ 1 ms)
+RETURN_CHUNK = 256      # the same for the return mappings of plastic materials (~5 us per
+                        # particle: a chunk of 256 is about 1 ms)
 MAX_CHUNKS = 256        # chunks of a per-particle pass (numba spreads them over the threads)
 # Both are compiled into the cached kernels of other modules, and numba's cache does not
 # notice a change in a callee's file: after changing them, delete the *.nbi/*.nbc files
@@ -50,10 +52,10 @@ def n_chunks(n):
 
 
 @njit(cache=True)
-def particle_chunks(n):
-    """Chunks of an n-particle pass that writes per particle only: n // MIN_CHUNK, at most
+def particle_chunks(n, min_chunk=MIN_CHUNK):
+    """Chunks of an n-particle pass that writes per particle only: n // min_chunk, at most
     MAX_CHUNKS, >= 1. It does not depend on the thread count (nor does the result)."""
-    return max(1, min(MAX_CHUNKS, n // MIN_CHUNK))
+    return max(1, min(MAX_CHUNKS, n // min_chunk))
 
 
 @njit(cache=True)

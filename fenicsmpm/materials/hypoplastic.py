@@ -59,6 +59,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .validation import check_positive, check_real
 
 __all__ = ["Hypoplastic", "geostatic", "hypoplastic_stress_kernel",
@@ -332,16 +333,33 @@ def _update(p, dF, sigma_old, state, par, tol, hseq, nfix, W, s, d):
     return e_new, nsub, nproj + nproj0
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=PRANGE, cache=True)
 def hypoplastic_stress_kernel(idx, dF, sigma_old, sigma_new, state, par, tol, stats):
     """sigma_new[p] and state[p] (e, delta) after the increment dF[p] for p in idx (module
     docstring: seed 004 eqs 3.1-3.22 integrated by RK2(3)); stats += (sub-steps, projections,
-    particles)."""
+    particles). Threaded over chunks of RETURN_CHUNK particles (kernels.threads); the counts
+    of the chunks are added in chunk order."""
+    n = idx.shape[0]
+    nc = particle_chunks(n, RETURN_CHUNK)
+    if nc == 1:
+        _hypo_stress(idx, dF, sigma_old, sigma_new, state, par, tol, np.int64(0), n, stats)
+        return
+    part = np.zeros((nc, stats.shape[0]), dtype=stats.dtype)
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _hypo_stress(idx, dF, sigma_old, sigma_new, state, par, tol, lo, hi, part[c])
+    for c in range(nc):
+        for k in range(stats.shape[0]):
+            stats[k] += part[c, k]
+
+
+@numba.njit(cache=True)
+def _hypo_stress(idx, dF, sigma_old, sigma_new, state, par, tol, lo, hi, stats):
     W = np.empty((15, 3, 3))
     s = np.empty((3, 3))
     d = np.empty((3, 3))
     hseq = np.empty(_MAXSUB)
-    for q in range(idx.shape[0]):
+    for q in range(lo, hi):
         p = idx[q]
         e_new, nsub, nproj = _update(p, dF[p], sigma_old, state, par, tol, hseq, 0, W, s, d)
         for i in range(3):

@@ -48,6 +48,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .regularisation import NonlocalSoftening
 from .validation import check_real
@@ -344,13 +345,25 @@ def _frozen(state, p, nl, mf, par, out):
     return state[p, nl] / (1.0 - mf), out
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=PRANGE, cache=True)
 def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf):
     """sigma_new = principal return of the Jaumann predictor; state[:, 0:3] += (d eps_d^p,
     d eps_v^p, d g).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians; nl:
     see _frozen.  The gap g = state[:, 2] >= 0 (module docstring) takes up compaction first:
     close = min(g, -tr eps) when tr eps < 0, and grows by the opening of apex and cut-off
-    returns."""
+    returns. Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n, RETURN_CHUNK)
+    if nc == 1:
+        return _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf,
+                          np.int64(0), n)
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf, lo, hi)
+
+
+@numba.njit(cache=True)
+def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf, lo, hi):
     pf = np.empty(5)
     S = np.empty((3, 3))
     sig = np.empty(3)
@@ -358,7 +371,7 @@ def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, pa
     W = np.empty((22, 3))
     M = np.empty((3, 4))
     w0 = np.empty(3)
-    for q in range(idx.shape[0]):
+    for q in range(lo, hi):
         p = idx[q]
         close = 0.0
         if state[p, 2] > 0.0:

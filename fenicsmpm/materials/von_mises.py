@@ -25,6 +25,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .mohr_coulomb import _trial
 from .regularisation import NonlocalSoftening
@@ -82,13 +83,26 @@ def _vm_return_over(S, A, mf, mu, c_u, c_res, H, s_out):
     return (q - _SQ3 * c0) / (3.0 * mu + _SQ3 * Hh), q, Hh
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=PRANGE, cache=True)
 def von_mises_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl, mf):
     """sigma_new = p_tr I + (1 - 3 G dg / q_tr) s_tr;  state[:, 0] += dg.  nl >= 0: the column
-    of the over-nonlocal A with factor mf (_vm_return_over), nl = -1: local softening."""
+    of the over-nonlocal A with factor mf (_vm_return_over), nl = -1: local softening.
+    Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n, RETURN_CHUNK)
+    if nc == 1:
+        return _vm_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl, mf,
+                          np.int64(0), n)
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _vm_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl, mf, lo, hi)
+
+
+@numba.njit(cache=True)
+def _vm_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl, mf, lo, hi):
     S = np.empty((3, 3))
     s = np.empty((3, 3))
-    for q in range(idx.shape[0]):
+    for q in range(lo, hi):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
         if nl < 0:
