@@ -60,6 +60,7 @@ import numba
 import numpy as np
 
 from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
+from .linear_elastic import strain_spin
 from .validation import check_positive, check_real
 
 __all__ = ["Hypoplastic", "geostatic", "hypoplastic_stress_kernel",
@@ -301,12 +302,9 @@ def _update(p, dF, sigma_old, state, par, tol, hseq, nfix, W, s, d):
     integrated M:D plus omega x - x omega with x the values at the start of the step);
     returns (e_new, sub-steps, projections)."""
     D, Om, d0 = W[11], W[12], W[13]
+    strain_spin(dF, D, Om)
     for i in range(3):
         for j in range(3):
-            hij = dF[i, j] - (1.0 if i == j else 0.0)
-            hji = dF[j, i] - (1.0 if i == j else 0.0)
-            D[i, j] = 0.5 * (hij + hji)
-            Om[i, j] = 0.5 * (hij - hji)
             s[i, j] = sigma_old[p, i, j]
     for k in range(6):
         d0[_VI[k], _VJ[k]] = state[p, 1 + k]

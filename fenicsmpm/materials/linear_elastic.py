@@ -20,7 +20,7 @@ from .validation import check_open_interval, check_positive
 from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 __all__ = ["LinearElastic", "IsotropicElasticParameters", "jaumann_tangent", "jaumann_update",
-           "linear_elastic_stress_kernel", "linear_elastic_tangent_kernel"]
+           "strain_spin", "linear_elastic_stress_kernel", "linear_elastic_tangent_kernel"]
 
 
 class IsotropicElasticParameters:
@@ -96,15 +96,22 @@ class IsotropicElasticParameters:
 
 
 @numba.njit(cache=True)
-def jaumann_update(dF, s_old, lam, mu, s_new, eps, om):
-    """One particle (3x3 arrays): s_new = s_old + lam tr(eps) I + 2 mu eps + om s_old - s_old om,
-    eps = sym(dF - I), om = skew(dF - I) (eps, om: 3x3 scratch)."""
+def strain_spin(dF, eps, om):
+    """The step's strain and spin increments of one particle (3x3 arrays):
+    eps = sym(dF - I), om = skew(dF - I)."""
     for i in range(3):
         for j in range(3):
             hij = dF[i, j] - (1.0 if i == j else 0.0)
             hji = dF[j, i] - (1.0 if i == j else 0.0)
             eps[i, j] = 0.5 * (hij + hji)
             om[i, j] = 0.5 * (hij - hji)
+
+
+@numba.njit(cache=True)
+def jaumann_update(dF, s_old, lam, mu, s_new, eps, om):
+    """One particle (3x3 arrays): s_new = s_old + lam tr(eps) I + 2 mu eps + om s_old - s_old om,
+    eps = sym(dF - I), om = skew(dF - I) (strain_spin; eps, om: 3x3 scratch)."""
+    strain_spin(dF, eps, om)
     tr = eps[0, 0] + eps[1, 1] + eps[2, 2]
     for i in range(3):
         for j in range(3):
