@@ -115,7 +115,7 @@ def test_bench_case_quick(tmp_path_factory):
                    e_0=0.65, p_t=1600.0)],                          # seed 004 Table 3.1
     ids=["MohrCoulomb", "VonMises", "Hypoplastic"])
 def test_threaded_return_mapping_is_bit_identical_to_one_pass(material):
-    """The plastic stress kernels run in chunks of kernels.threads.RETURN_CHUNK particles
+    """The plastic stress (and tangent) kernels run in chunks of kernels.threads.RETURN_CHUNK particles
     (threaded); per-particle results do not depend on the chunks: compare 4096 particles in
     one call against 16 calls of 256 (one chunk each), with elastic, plastic, apex/cut-off
     and gap-closing states mixed."""
@@ -138,6 +138,12 @@ def test_threaded_return_mapping_is_bit_identical_to_one_pass(material):
     for k in range(0, n, 256):
         material.stress(np.arange(k, k + 256), dF, None, sigma, out2, st2)
     assert np.array_equal(out1, out2) and np.array_equal(st1, st2)
+    if not isinstance(material, fm.Hypoplastic):          # the consistent tangents likewise
+        t1, t2 = np.empty((n, 3, 3, 3, 3)), np.empty((n, 3, 3, 3, 3))
+        material.tangent(np.arange(n), dF, None, sigma, out1, state, t1)
+        for k in range(0, n, 256):
+            material.tangent(np.arange(k, k + 256), dF, None, sigma, out1, state, t2)
+        assert np.array_equal(t1, t2)
     changed = st1[:, 0] != state[:, 0] if not isinstance(material, fm.Hypoplastic) else \
         np.abs(out1 - sigma).max(axis=(1, 2)) > 0
     assert np.count_nonzero(changed) > n // 10        # the states did evolve

@@ -400,9 +400,22 @@ def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl,
         state[p, 2] += opening
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=PRANGE, cache=True)
 def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf):
-    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state."""
+    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state.
+    Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n, RETURN_CHUNK)
+    if nc == 1:
+        return _mc_tangent(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf,
+                           np.int64(0), n)
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _mc_tangent(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf, lo, hi)
+
+
+@numba.njit(cache=True)
+def _mc_tangent(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf, lo, hi):
     pf = np.empty(5)
     S = np.empty((3, 3))
     sig = np.empty(3)
@@ -415,7 +428,7 @@ def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, s
     M = np.empty((3, 4))
     w0 = np.empty(3)
     V = np.eye(3)
-    for q in range(idx.shape[0]):
+    for q in range(lo, hi):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
         kap, pp = _frozen(state, p, nl, mf, par, pf)

@@ -116,13 +116,26 @@ def _vm_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl,
         state[p, 0] += dg
 
 
-@numba.njit(cache=True)
+@numba.njit(parallel=PRANGE, cache=True)
 def von_mises_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H, nl, mf):
-    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state."""
+    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state.
+    Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n, RETURN_CHUNK)
+    if nc == 1:
+        return _vm_tangent(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H, nl, mf,
+                           np.int64(0), n)
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _vm_tangent(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H, nl, mf, lo, hi)
+
+
+@numba.njit(cache=True)
+def _vm_tangent(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H, nl, mf, lo, hi):
     S = np.empty((3, 3))
     s = np.empty((3, 3))
     E = np.empty((3, 3))
-    for q in range(idx.shape[0]):
+    for q in range(lo, hi):
         p = idx[q]
         _trial(p, dF, sigma_old, lam, mu, S)
         if nl < 0:
