@@ -64,6 +64,7 @@ _TCUT = np.array([2, 1, 0], dtype=np.int64)
 _SETS = np.array([[0, -1, -1], [3, -1, -1], [0, 1, -1], [0, 2, -1], [3, 4, -1], [0, 3, -1],
                   [0, 2, 3], [0, 1, 3], [0, 1, 4], [0, 3, 4], [1, 3, 4], [3, 4, 5]],
                  dtype=np.int64)
+_CUT_SETS = np.array([np.any(s >= 3) for s in _SETS])    # sets with a tension cut-off plane
 _SQ23 = math.sqrt(2.0 / 3.0)
 
 
@@ -222,6 +223,8 @@ def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
     Amat, Bmat, J = W[13:16], W[16:19], W[19:22]
     tol = 1e-10 * scale
     for sid in range(_SETS.shape[0]):
+        if _CUT_SETS[sid] and st == math.inf:   # no cut-off: f = sigma_k - inf never 0, inactive
+            continue
         m, kappa = _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl,
                               Amat, Bmat, J, W, M)
         if m < 0:
