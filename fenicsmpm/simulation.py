@@ -233,7 +233,6 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                 self.nodes = np.empty((n, nv), dtype=np.int32)
                 self.N = np.empty((n, nv))
                 self.dN = np.empty((n, nv, self.gdim))
-            self._state_new = np.empty_like(p.state)
             self._n_alloc = n
         if self._wide is None:
             ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
@@ -377,8 +376,6 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         t0 = time.perf_counter()
         state = p.state
         if p.state.shape[1]:
-            if self._state_new.shape != p.state.shape:
-                self._state_new = np.empty_like(p.state)
             state = self._state_new
             state[:] = p.state
         for mat, idx in self.material_groups():
@@ -389,9 +386,10 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     def _per_particle(self, name, shape):
         """A float64 work array (n_particles,) + shape, kept between steps, allocated at first
         use (contents undefined)."""
+        shape = (len(self.particles),) + tuple(shape)
         a = self._scratch.get(name)
-        if a is None or len(a) != len(self.particles):
-            a = self._scratch[name] = np.empty((len(self.particles),) + shape)
+        if a is None or a.shape != shape:
+            a = self._scratch[name] = np.empty(shape)
         return a
 
     @property
@@ -399,6 +397,11 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         """The step's incremental deformation gradients (n, 3, 3) (the fused elastic pass of
         stress_update needs none)."""
         return self._per_particle("dF", (3, 3))
+
+    @property
+    def _state_new(self):
+        """The trial history (n, columns of particles.state) of trial_stress."""
+        return self._per_particle("state_new", self.particles.state.shape[1:])
 
     @property
     def _sigma_new(self):

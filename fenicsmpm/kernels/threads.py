@@ -7,8 +7,8 @@ rank its share of the cores on its node (called when this module is imported), s
 `mpirun -n <cores>` runs one thread per rank.
 
 Passes that write per particle only (G2P, dF, commit, shape functions, the linear-elastic
-stress, the guards' scan) use
-particle_chunks(n) chunks, which does not depend on the thread count: the same bits on
+stress, the guards' scan) use particle_chunks(n) chunks, the plastic return mappings
+particle_chunks(n, RETURN_CHUNK); neither depends on the thread count: the same bits on
 any number of threads.
 Passes that add into grid nodes (P2G) use one chunk per thread (n_chunks). Chunk 0 adds
 straight into the output, every other chunk c into its own nodal array (kept between
@@ -37,10 +37,10 @@ PRANGE = ParallelOptions(dict(prange=True, comprehension=False, reduction=False,
 
 MIN_CHUNK = 8192        # particles; below 2 MIN_CHUNK a pass runs serially (a thread
                         # start-up costs ~0.01-1 ms: worth it for passes of >~ 1 ms)
-RETURN_CHUNK = 256      # the same for the return mappings of plastic materials (~5 us per
+RETURN_CHUNK = 256      # the same for the return mappings of plastic materials (3-5 us per
                         # particle: a chunk of 256 is about 1 ms)
 MAX_CHUNKS = 256        # chunks of a per-particle pass (numba spreads them over the threads)
-# Both are compiled into the cached kernels of other modules, and numba's cache does not
+# These are compiled into the cached kernels of other modules, and numba's cache does not
 # notice a change in a callee's file: after changing them, delete the *.nbi/*.nbc files
 # under fenicsmpm/ (the cached kernels then compile again).
 
