@@ -77,9 +77,11 @@ Penalty contact (algorithm="penalty", 2D; seed 004 eqs 2.40-2.53; contact.penalt
 has the equations, the sign convention g_n < 0 = penetration, the Coulomb cap |f_t| <= mu f_n
 with f_n >= 0 compressive, the MPI scheme and the stability limit): every body needs a
 boundary polyline, `add_polyline(body, vertices, closed=False)`; the vertices move with the
-body's grid velocity, node-to-segment penalty forces (k_n, k_t: `penalty=dict(k_n=..., k_t=...)`,
-k_t = k_n by default) between the bodies' polylines are mapped to each body's nodes as
-external forces before the trial velocities, and the nodal projection above is not applied.
+body's grid velocity (with MUSL the re-mapped one, the velocity the stress update sees, so
+the springs and the bodies' strain follow one motion), node-to-segment penalty forces
+(k_n, k_t, damping: `penalty=dict(k_n=..., k_t=..., damping=...)`, k_t = k_n and damping 0.1
+by default) between the bodies' polylines are mapped to each body's nodes as external
+forces before the trial velocities, and the nodal projection above is not applied.
 Rigid bodies' polylines move with their prescribed velocity. The per-body contact force is
 again `body_contact_force`, and `penalty_stats` holds the step's number of pairs, slipping
 pairs and largest penetration.
@@ -97,7 +99,7 @@ from numba import njit
 from ..kernels import transfer as kt
 from ..integrators.explicit import SCHEMES
 from ..kernels import axisymmetric as axi
-from .penalty import PenaltyContact, check_polyline
+from .penalty import DAMPING as PENALTY_DAMPING, PenaltyContact, check_polyline
 from .rigid import RigidLoad
 
 __all__ = ["ExplicitContact", "set_body", "body_ids"]
@@ -478,8 +480,9 @@ class ExplicitContact:
     or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
-    algorithm="penalty": penalty=dict(k_n=..., k_t=...) (> 0 and >= 0, force per unit length
-    per unit penetration/slip; k_t defaults to k_n; about (K + 4G/3)/h of the stiffer body),
+    algorithm="penalty": penalty=dict(k_n=..., k_t=..., damping=...) (> 0, >= 0 and >= 0;
+    force per unit length per unit penetration/slip, k_t defaults to k_n, about (K + 4G/3)/h
+    of the stiffer body; damping the normal dashpot's ratio to critical, default 0.1),
     and a polyline for every body (add_polyline); normal and gap are not used.
     Fields after each step: `body_contact_force` (nb, gdim), the global contact force on each
     body; `nodal` in the simulation holds the centre-of-mass nodal velocity."""
@@ -535,16 +538,18 @@ class ExplicitContact:
             raise ValueError("ExplicitContact: 'penalty' = dict(k_n=..., k_t=...) is required by, "
                              "and only used with, algorithm='penalty'")
         if penalty is not None:
-            if not isinstance(penalty, dict) or "k_n" not in penalty or set(penalty) - {"k_n", "k_t"}:
-                raise ValueError(f"ExplicitContact: 'penalty' must be dict(k_n=..., k_t=...) with "
-                                 f"k_t optional, got {penalty!r}")
+            if (not isinstance(penalty, dict) or "k_n" not in penalty
+                    or set(penalty) - {"k_n", "k_t", "damping"}):
+                raise ValueError(f"ExplicitContact: 'penalty' must be dict(k_n=..., k_t=..., "
+                                 f"damping=...) with k_t and damping optional, got {penalty!r}")
             kn, kt_ = penalty["k_n"], penalty.get("k_t", penalty["k_n"])
-            for name, v, lo in (("k_n", kn, 0.0), ("k_t", kt_, None)):
+            zeta = penalty.get("damping", PENALTY_DAMPING)
+            for name, v, lo in (("k_n", kn, 0.0), ("k_t", kt_, None), ("damping", zeta, None)):
                 ok = isinstance(v, (int, float, np.floating)) and np.isfinite(v)
                 if not ok or (v <= lo if lo is not None else v < 0):
                     raise ValueError(f"ExplicitContact: penalty {name} must be a finite number "
                                      f"{'> 0' if lo is not None else '>= 0'}, got {v!r}")
-            self.k_n, self.k_t = float(kn), float(kt_)
+            self.k_n, self.k_t, self.damping = float(kn), float(kt_), float(zeta)
         self.polylines = []
         self._penalty = None
         self.penalty_stats = None
@@ -589,7 +594,7 @@ class ExplicitContact:
             if max(have) >= self.nb:
                 raise ValueError(f"ExplicitContact(penalty): polyline of body {max(have)} but the "
                                  f"bodies are 0..{self.nb - 1}")
-            self._penalty = PenaltyContact(self.k_n, self.k_t, self.polylines)
+            self._penalty = PenaltyContact(self.k_n, self.k_t, self.polylines, self.damping)
         return self._penalty
 
     # ------------------------------------------------------------------ helpers
@@ -801,7 +806,7 @@ class ExplicitContact:
         sim.record_work(f_ext, f_robin, vcm0, vcm1, dt)
         t2 = time.perf_counter()
         vr = self._rigid_velocity(sim.t + dt, d) if self.rigid else np.zeros((nb, d))
-        if self.algorithm == "penalty":
+        if self.algorithm == "penalty" and self.scheme != "MUSL":
             pc.move(sim, present, m_b, v1, self._is_rigid, vr, dt)
         g2p_bodies(D, sim.nodes, sim.N, body, self._is_rigid, vr, dt, v0, v1, self.flip,
                    p.x, p.v, p.u)
@@ -816,6 +821,8 @@ class ExplicitContact:
             v1 = self._velocities(sim, mv2, inv_mb, free, sim.t + dt)
             self._contact(sim, v1, dt, np.zeros_like(fc), trial=False)
             T["p2g"] += time.perf_counter() - t3
+            if self.algorithm == "penalty" and self.scheme == "MUSL":   # the velocity the
+                pc.move(sim, present, m_b, v1, self._is_rigid, vr, dt)      # stress update sees
         if self.scheme != "USF":
             self._stress_update(sim, body, v1, dt if self.scheme != "AVG" else 0.5 * dt)
         self.contact_force = fc

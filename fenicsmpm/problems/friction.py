@@ -67,10 +67,11 @@ def block_on_base(scheme="MUSL", mu=0.5, theta=0.0, geostatic=False, ramp=None, 
     return sim, base, _history(sim, frame, lambda: slice(None))
 
 
-def block_on_rigid_body(mu, theta=30.0, h=0.05, algorithm="multi-velocity", comm=None):
+def block_on_rigid_body(mu, theta=30.0, h=0.05, algorithm="multi-velocity", comm=None, shape="auto"):
     """The block (body 0, geostatic) on a rigid body (body 1, held at rest, its face on the
     grid line y = 0.25, prescribed outward normal (0, 1)), gravity rotated by theta, through
-    fm.ExplicitContact (multi-velocity, or penalty with polylines on both faces).
+    fm.ExplicitContact (multi-velocity, or penalty with polylines on both faces), with the
+    shape family `shape`.
     Returns (sim, history as in block_on_base)."""
     from dolfinx import mesh
     from mpi4py import MPI
@@ -94,7 +95,7 @@ def block_on_rigid_body(mu, theta=30.0, h=0.05, algorithm="multi-velocity", comm
         integ.add_polyline(1, line((3.0, y0), (0.0, y0), round(6.0 / h)))
     else:
         integ = fm.ExplicitContact("MUSL", mu=mu, rigid={1: (0.0, 0.0)}, normal={1: (0.0, 1.0)})
-    sim = fm.Simulation(grid, p, integ, dt="auto", gravity=(G * np.sin(th), -G * np.cos(th)))
+    sim = fm.Simulation(grid, p, integ, dt="auto", gravity=(G * np.sin(th), -G * np.cos(th)), shape=shape)
     return sim, _history(sim, lambda x: x, lambda: p.body == 0)
 
 
