@@ -473,6 +473,10 @@ class ExplicitContact:
     """Explicit MPM (the update orders of fm.Explicit) with one velocity field per body and
     multi-velocity or penalty frictional contact between them (module docstring).
 
+    flip: the FLIP fraction, 1 (pure FLIP) by default for every material; unlike
+    fm.Explicit there is no plastic default of 0.99: on Prandtl's smooth footing it measured
+    worse (docs/guide/choosing.md, "FLIP fraction for plastic flow").
+
     mu: Coulomb coefficient between every pair of bodies (>= 0; 0 is frictionless, a large
     value sticks without gluing: separation is still allowed), or a dict {(a, b): mu_ab}
     over body pairs with the default `mu_default` for the others.
