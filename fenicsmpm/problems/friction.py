@@ -31,10 +31,11 @@ def _geostatic(p, sel, depth, th, R):
 
 
 def block_on_base(scheme="MUSL", mu=0.5, theta=0.0, geostatic=False, ramp=None, cfl=0.5, h=0.05,
-                  inclined_mesh=False, contact=False, shape="mpm", comm=None):
+                  inclined_mesh=False, contact=False, shape="mpm", transfer=None, comm=None):
     """The block on a frictional base `sim.add_friction` inclined by theta: gravity rotated,
     or with inclined_mesh the mesh rotated and the base normal taken from its facets; with
-    `contact` the block is two bodies side by side (fm.ExplicitContact, mu 0.5 between them).
+    `contact` the block is two bodies side by side (fm.ExplicitContact, mu 0.5 between them);
+    `transfer` is fm.Explicit's (None: FLIP, "apic").
     Returns (sim, base boundary, history list of (t, along, normal) mass-weighted
     displacement, appended every 5 steps)."""
     from dolfinx import mesh
@@ -54,7 +55,7 @@ def block_on_base(scheme="MUSL", mu=0.5, theta=0.0, geostatic=False, ramp=None, 
     if geostatic:
         _geostatic(p, slice(None), H - frame(p.x)[:, 1], th, rot if inclined_mesh else np.eye(2))
     gravity = (0.0, -G) if inclined_mesh else (G * np.sin(th), -G * np.cos(th))
-    integrator = fm.Explicit(scheme)
+    integrator = fm.Explicit(scheme, transfer=transfer)
     if contact:
         fm.set_body(p, 1, region=lambda x: frame(x)[:, 0] > 1.0)
         integrator = fm.ExplicitContact(scheme, mu=0.5)
