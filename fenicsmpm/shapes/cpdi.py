@@ -122,6 +122,7 @@ def corner_weights(corners, w_out, g_out):
 # Corners of a hexahedral domain in the tensor (dolfinx) order: corner c = b0 + 2 b1 + 4 b2
 # sits at reference point (b0, b1, b2) of the trilinear map, M_c = prod_k (b_k ? s_k : 1 - s_k).
 N_CORNERS_3D = 8
+TET_DOMAINS = True
 
 
 @njit(cache=True)
@@ -261,6 +262,81 @@ def corner_weights3(corners, w_out, g_out):
 
 
 @njit(cache=True)
+def _tet_corners(x, F, r0, corners_out, lo, hi):
+    for p in range(lo, hi):
+        for c in range(4):
+            for i in range(3):
+                corners_out[p, c, i] = (x[p, i] + F[p, i, 0] * r0[p, c, 0] + F[p, i, 1] * r0[p, c, 1]
+                                        + F[p, i, 2] * r0[p, c, 2])
+
+
+@njit(parallel=PRANGE, cache=True)
+def tet_corners(x, F, r0, corners_out):
+    """Corners of tetrahedral CPDI1 domains: x_c = x_p + F_p r_c^0 (r0 (n, 4, 3), the initial
+    corner offsets from the centroid, sum_c r_c^0 = 0)."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _tet_corners(x, F, r0, corners_out, np.int64(0), n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _tet_corners(x, F, r0, corners_out, lo, hi)
+
+
+@njit(cache=True)
+def _tet_weights(corners, w_out, g_out, lo, hi):
+    vmin = np.inf
+    e = np.empty((3, 3))
+    for p in range(lo, hi):
+        for k in range(3):
+            for i in range(3):
+                e[k, i] = corners[p, k + 1, i] - corners[p, 0, i]
+        for k in range(3):                          # g_(k+1) = (e_(k+1) x e_(k+2)) / 6
+            u, v = e[(k + 1) % 3], e[(k + 2) % 3]
+            g_out[p, k + 1, 0] = (u[1] * v[2] - u[2] * v[1]) / 6.0
+            g_out[p, k + 1, 1] = (u[2] * v[0] - u[0] * v[2]) / 6.0
+            g_out[p, k + 1, 2] = (u[0] * v[1] - u[1] * v[0]) / 6.0
+        for i in range(3):
+            g_out[p, 0, i] = -(g_out[p, 1, i] + g_out[p, 2, i] + g_out[p, 3, i])
+        V = e[0, 0] * g_out[p, 1, 0] + e[0, 1] * g_out[p, 1, 1] + e[0, 2] * g_out[p, 1, 2]
+        for c in range(4):
+            w_out[p, c] = 0.25 * V
+        vmin = min(vmin, V)
+    return vmin
+
+
+@njit(parallel=PRANGE, cache=True)
+def tet_weights(corners, w_out, g_out):
+    """Tetrahedral domains (corners (n, 4, 3), positively oriented), linear M_c:
+    w_c = V_p / 4, g_c = V_p grad M_c: g_k = (e_(k+1) x e_(k+2)) / 6 for k = 1..3 (e_k =
+    x_k - x_0, cyclic), g_0 = -(g_1 + g_2 + g_3), V_p = e_1 . (e_2 x e_3) / 6 (Sadeghirad et
+    al. 2013, tetrahedral CPDI2 domains). Returns the smallest V_p."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _tet_weights(corners, w_out, g_out, np.int64(0), n)
+    vmin = np.empty(nc)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        vmin[c] = _tet_weights(corners, w_out, g_out, lo, hi)
+    return vmin.min()
+
+
+def initial_tets(grid, particles):
+    """Initial tetrahedral domains (n, 4, 3) as offsets from x_p: the particle's cell shrunk
+    about its centroid to volume V0_p, r_c^0 = (V0_p / V_cell)^(1/3) (X_c - X_centroid),
+    vertices 1 and 2 swapped where the cell is negatively oriented. With one particle per
+    cell (Particles.fill(per_cell=1)) the domains are the cells: they tile the body."""
+    X = grid.node_x[grid.cell_nodes[particles.cell]]           # (n, 4, 3)
+    e = X[:, 1:] - X[:, :1]
+    det = np.linalg.det(e) if len(X) else np.zeros(0)
+    flip = det < 0
+    X[flip, 1], X[flip, 2] = X[flip, 2].copy(), X[flip, 1].copy()
+    s = np.cbrt(particles.V0 / (np.abs(det) / 6.0))
+    return (X - X.mean(axis=1, keepdims=True)) * s[:, None, None]
+
+
+@njit(cache=True)
 def _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, hi):
     d = len(D)
     nv = nodes_out.shape[1]
@@ -381,17 +457,23 @@ class CpdiShape:
                                       f"got gdim = {d}")
         if not grid.has_vertex_ring():
             raise ValueError(_RING_MESSAGE.format(name="CPDI"))
+        from . import standard as ks
         self.version = int(version)
         self.d = d
-        self.n_corners = N_CORNERS if d == 2 else N_CORNERS_3D
-        if not hasattr(p, "cpdi_r0"):
+        self.tets = d == 3 and grid.kind == ks.SIMPLEX and TET_DOMAINS
+        self.n_corners = N_CORNERS if d == 2 else 4 if self.tets else N_CORNERS_3D
+        if self.tets and not hasattr(p, "cpdi_t0"):
+            p.add_field("cpdi_t0", (4, 3))[:] = initial_tets(grid, p)
+        if not self.tets and not hasattr(p, "cpdi_r0"):
             p.add_field("cpdi_r0", (d, d))[:] = initial_edges(grid, p)
         if self.version == 2 and not hasattr(p, "cpdi_corners"):
             self._cpdi1_corners(p, p.add_field("cpdi_corners", (self.n_corners, d)))
         self._corner_shape = None
 
     def _cpdi1_corners(self, p, out):
-        if self.d == 2:
+        if self.tets:
+            tet_corners(p.x, p.F, p.cpdi_t0, out)
+        elif self.d == 2:
             cpdi1_corners(p.x, p.F, p.cpdi_r0, out)
         else:
             cpdi1_corners3(p.x, p.F, p.cpdi_r0, out)
@@ -420,7 +502,7 @@ class CpdiShape:
         cN = cN.reshape(n, ncor, nvc)
         w = np.empty((n, ncor))
         gc = np.empty((n, ncor, d))
-        weights = (corner_weights if d == 2 else
+        weights = (corner_weights if d == 2 else tet_weights if self.tets else
                    parallelepiped_weights if self.version == 1 else corner_weights3)
         if n and weights(corners, w, gc) <= 0.0:
             bad = int(np.argmin(w.sum(axis=1)))
