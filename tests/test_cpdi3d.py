@@ -182,16 +182,17 @@ def test_rigid_rotation_keeps_volume(shape, cell_type):
 H, RHO, E_SOFT, G, T_RAMP = 10.0, 6000.0, 5e6, 10.0, 20.0
 
 
-def soft_column_3d(shape, n_cells=10, comm=MPI.COMM_WORLD):
+def soft_column_3d(shape, n_cells=10, comm=MPI.COMM_WORLD, per_cell=1):
     """BENCHMARKS L1 soft case in 3D: a column h x h x H of tetrahedra (1 x 1 x n_cells + 2
-    boxes of 6, dolfinx's default partitioner), one particle per cell, rollers on the sides,
+    boxes of 6, dolfinx's default partitioner), `per_cell` particles per cell as in
+    Particles.fill (1: one per tetrahedron, at its centroid), rollers on the sides,
     E = 5 MPa, nu = 0, rho = 6000; explicit MUSL, gravity ramped by the seed-002 sine over
     T/2 = 10 s and held to T = 20 s. Returns (X0, sigma_zz) of the local particles."""
     h = H / n_cells
     msh = dmesh.create_box(comm, [[0, 0, 0], [h, h, H + 2 * h]], [1, 1, n_cells + 2], CT.tetrahedron)
     grid = fm.Grid(msh)
-    pts = fm.Particles.fill(grid, fm.LinearElastic(E=E_SOFT, nu=0.0, density=RHO), per_cell=1,
-                            region=lambda x: x[:, 2] < H)
+    pts = fm.Particles.fill(grid, fm.LinearElastic(E=E_SOFT, nu=0.0, density=RHO),
+                            per_cell=per_cell, region=lambda x: x[:, 2] < H)
     sim = fm.Simulation(grid, pts, fm.Explicit("MUSL"), dt="auto", shape=shape)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], h), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0) | np.isclose(x[:, 1], h), [1])
@@ -208,9 +209,10 @@ def soft_column_3d(shape, n_cells=10, comm=MPI.COMM_WORLD):
 def test_physical_soft_column_tetrahedra():
     """max |sigma_zz + rho g d| / (rho g H) over all particles (d the initial depth; the top
     settles about 0.57 h, so particles cross the cells' faces), 10 cells over H, one particle
-    per tetrahedron. Measured (serial; scratch runs of the same set-up, wall times of the
-    step loop): CPDI1 2.78 % (rms 1.93 %, 0.63 s), standard MPM 72.8 % (rms 18.1 %, 0.38 s);
-    at 20 cells CPDI1 1.35 % (rms 0.99 %, 2.1 s), MPM 92.4 % (rms 23.1 %, 1.24 s).
+    per tetrahedron. Measured (serial, `PYTHONPATH=. python tests/test_cpdi3d.py`, wall
+    time of the run, set-up included): CPDI1 2.78 % (rms 1.93 %, 1.05 s), standard MPM
+    72.8 % (rms 18.1 %, 0.83 s); at 20 cells CPDI1 1.35 % (rms 0.99 %, 2.65 s), MPM 92.4 %
+    (rms 23.1 %, 1.07 s).
     Asserted: CPDI1 below 4 % and below a tenth of MPM's error."""
     errs = {}
     for shape in ("mpm", "cpdi1"):
@@ -260,3 +262,18 @@ def test_auto_falls_back_on_tetrahedra():
     assert sim.shape == "mpm" and sim.shape_reason.startswith("implicit"), sim.shape_reason
     sim = _auto(fm.Explicit(), material=fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3))
     assert sim.shape == "mpm" and "MohrCoulomb" in sim.shape_reason, sim.shape_reason
+
+
+if __name__ == "__main__":
+    # the measurement behind choose_shape's 3D entry: max and rms |sigma_zz + rho g d| / (rho g H)
+    # and wall time, standard MPM against CPDI1 and CPDI2, 10 and 20 cells, 1 and 2 per cell
+    import time
+    for per_cell in (1, 2):
+        for n_cells in (10, 20):
+            for shape in ("mpm", "cpdi1", "cpdi2"):
+                t0 = time.perf_counter()
+                X0, szz = soft_column_3d(shape, n_cells, per_cell=per_cell)
+                wall = time.perf_counter() - t0
+                err = np.abs(szz + RHO * G * (H - X0[:, 2])) / (RHO * G * H)
+                print(f"per_cell {per_cell}, {n_cells} cells, {shape}: max {100 * err.max():.2f} %, "
+                      f"rms {100 * np.sqrt(np.mean(err ** 2)):.2f} %, {wall:.2f} s", flush=True)

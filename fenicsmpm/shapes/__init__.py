@@ -16,7 +16,7 @@ def choose_shape(sim):
     grids, CPDI2 on other 2D meshes (triangles, unstructured quadrilaterals), CPDI1 on other
     3D meshes (tetrahedra: tetrahedral domains, the cells themselves with one particle per
     cell; hexahedra: parallelepipeds). 3D soft column on tetrahedra (BENCHMARKS L1 soft case,
-    tests/test_cpdi3d.py), max |sigma_zz + rho g d| / (rho g H) with one particle per cell:
+    `PYTHONPATH=. python tests/test_cpdi3d.py`), max |sigma_zz + rho g d| / (rho g H) with one particle per cell:
     CPDI1 2.8 % / 1.4 % against standard MPM 73 % / 92 % at 10 / 20 cells over H; with the
     8 Gauss-Jacobi particles of Particles.fill(per_cell=2) the shrunk cells overlap and CPDI1
     gives 49 % / 85 % against 102 % / 96 % (rms 7.1 % / 11 % against 9.7 % / 15 %). The standard
