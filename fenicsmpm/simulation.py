@@ -53,10 +53,10 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     particle stress; the constitutive update still acts on the particle stress.
     shape: the shape-function family, one of SHAPES: "auto" (shapes.choose_shape: the most
     accurate family the mesh and options support, cpGIMP on structured grids, CPDI2 on other
-    2D meshes, else "mpm"; the choice and its reason are `shape` and `shape_reason`, and are
+    2D meshes, CPDI1 on other 3D meshes, else "mpm"; the choice and its reason are `shape` and `shape_reason`, and are
     logged on rank 0), "mpm" (the Lagrange basis of the
     particle's cell), "ugimp"/"cpgimp" (shapes.gimp: structured quadrilateral/hexahedral
-    grids), "cpdi1"/"cpdi2" (shapes.cpdi: any 2D P1/Q1 mesh), "gauss" (shapes.gauss_gimp:
+    grids), "cpdi1"/"cpdi2" (shapes.cpdi: any 2D or 3D P1/Q1 mesh), "gauss" (shapes.gauss_gimp:
     deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
     P1/Q1 mesh). The wider families need, in parallel, the vertex ghost layer: a mesh
     without it (dolfinx's default partitioner) is rebuilt from the same cells with the same

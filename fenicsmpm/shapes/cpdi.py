@@ -1,4 +1,4 @@
-"""CPDI shape functions (convected particle domain interpolation, 2D) on any P1/Q1 mesh.
+"""CPDI shape functions (convected particle domain interpolation, 2D and 3D) on any P1/Q1 mesh.
 
 A particle's domain Omega_p is a quadrilateral with corners x_1..x_4 (counter-clockwise).
 With M_c the bilinear corner functions of the domain and S_i the grid's standard shape
@@ -16,6 +16,13 @@ so w_c = V_p / 4 and the gradient above is
 CPDI2 (Sadeghirad et al. 2013, quadrilateral domains): the corners are material points
 themselves, moved with the grid velocity, x_c += dt sum_i S_i(x_c) v_i, so the domain can
 take any quadrilateral shape; w_c is integrated exactly by 2 x 2 Gauss points.
+3D (the same equations with 8 corners and trilinear M_c, corner c = b0 + 2 b1 + 4 b2 at
+reference point (b0, b1, b2), s_k = 2 b_k - 1): CPDI1's domain is the parallelepiped of edges
+r_k = F_p r_k^0, x_c = x_p + 1/2 sum_k s_k r_k, w_c = V_p / 8, V_p = r1 . (r2 x r3) and
+    g_c = 1/4 [s_1 (r2 x r3) + s_2 (r3 x r1) + s_3 (r1 x r2)]
+(grad M_c = J^-T grad_xi M_c with J = [r1 r2 r3], int over the unit cube of dM_c/dxi_k =
+s_k / 4, and det J J^-T = cof J; in 2D the same gives the formula above). CPDI2's hexahedral
+domains get w_c and g_c = int cof(J) grad_xi M_c dxi by 2 x 2 x 2 Gauss points (exact).
 Both satisfy sum_i phi_ip = 1 and sum_i grad phi_ip = 0 and reproduce affine fields exactly
 (S_i does at each corner).
 """
@@ -111,14 +118,235 @@ def corner_weights(corners, w_out, g_out):
     return vmin.min()
 
 
+# ---------------------------------------------------------------------------------- 3D
+# Corners of a hexahedral domain in the tensor (dolfinx) order: corner c = b0 + 2 b1 + 4 b2
+# sits at reference point (b0, b1, b2) of the trilinear map, M_c = prod_k (b_k ? s_k : 1 - s_k).
+N_CORNERS_3D = 8
+TET_DOMAINS = True
+
+
+@njit(cache=True)
+def _cpdi1_corners3(x, F, r0, corners_out, lo, hi):
+    r = np.empty((3, 3))
+    for p in range(lo, hi):
+        for k in range(3):
+            for i in range(3):
+                r[k, i] = F[p, i, 0] * r0[p, k, 0] + F[p, i, 1] * r0[p, k, 1] + F[p, i, 2] * r0[p, k, 2]
+        for c in range(8):
+            for i in range(3):
+                v = x[p, i]
+                for k in range(3):
+                    v += (0.5 if (c >> k) & 1 else -0.5) * r[k, i]
+                corners_out[p, c, i] = v
+
+
+@njit(parallel=PRANGE, cache=True)
+def cpdi1_corners3(x, F, r0, corners_out):
+    """Corners of the 3D CPDI1 parallelepipeds: r_k = F_p r_k^0, x_c = x_p + 1/2 sum_k s_k r_k,
+    s_k = +1 where bit k of c is set, else -1 (c = 0..7). r0: (n, 3, 3), r0[p, k] is edge k."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _cpdi1_corners3(x, F, r0, corners_out, np.int64(0), n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _cpdi1_corners3(x, F, r0, corners_out, lo, hi)
+
+
+@njit(cache=True)
+def _parallelepiped_weights(corners, w_out, g_out, lo, hi):
+    vmin = np.inf
+    r = np.empty((3, 3))
+    a = np.empty((3, 3))
+    for p in range(lo, hi):
+        for k in range(3):                          # r_k = x_(2^k) - x_0
+            for i in range(3):
+                r[k, i] = corners[p, 1 << k, i] - corners[p, 0, i]
+        for k in range(3):                          # a_k = r_(k+1) x r_(k+2)
+            u, v = r[(k + 1) % 3], r[(k + 2) % 3]
+            a[k, 0] = u[1] * v[2] - u[2] * v[1]
+            a[k, 1] = u[2] * v[0] - u[0] * v[2]
+            a[k, 2] = u[0] * v[1] - u[1] * v[0]
+        V = r[0, 0] * a[0, 0] + r[0, 1] * a[0, 1] + r[0, 2] * a[0, 2]
+        for c in range(8):
+            w_out[p, c] = 0.125 * V
+            for i in range(3):
+                v = 0.0
+                for k in range(3):
+                    v += (0.25 if (c >> k) & 1 else -0.25) * a[k, i]
+                g_out[p, c, i] = v
+        vmin = min(vmin, V)
+    return vmin
+
+
+@njit(parallel=PRANGE, cache=True)
+def parallelepiped_weights(corners, w_out, g_out):
+    """CPDI1 in 3D: w_c = V_p / 8 and g_c = int grad M_c dx = 1/4 sum_k s_k (r_(k+1) x r_(k+2))
+    (k cyclic; the cofactor matrix of [r1 r2 r3] times the integral s_k / 4 of dM_c/dxi_k over
+    the unit cube), V_p = r1 . (r2 x r3); r_k = x_(2^k) - x_0 from the corners (n, 8, 3) of
+    cpdi1_corners3. Returns the smallest V_p (<= 0: inside out)."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _parallelepiped_weights(corners, w_out, g_out, np.int64(0), n)
+    vmin = np.empty(nc)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        vmin[c] = _parallelepiped_weights(corners, w_out, g_out, lo, hi)
+    return vmin.min()
+
+
+@njit(cache=True)
+def _corner_weights3(corners, w_out, g_out, lo, hi):
+    vmin = np.inf
+    M = np.empty(8)
+    dM = np.empty((8, 3))
+    J = np.empty((3, 3))                            # J[k] = dx/dxi_k (rows)
+    cof = np.empty((3, 3))                          # cof[k] = J[k+1] x J[k+2]
+    s = np.empty(3)
+    for p in range(lo, hi):
+        for c in range(8):
+            w_out[p, c] = 0.0
+            for i in range(3):
+                g_out[p, c, i] = 0.0
+        for q in range(8):
+            for k in range(3):
+                s[k] = _GP[(q >> k) & 1]
+            for c in range(8):
+                f0 = s[0] if c & 1 else 1.0 - s[0]
+                f1 = s[1] if c & 2 else 1.0 - s[1]
+                f2 = s[2] if c & 4 else 1.0 - s[2]
+                M[c] = f0 * f1 * f2
+                dM[c, 0] = (1.0 if c & 1 else -1.0) * f1 * f2
+                dM[c, 1] = (1.0 if c & 2 else -1.0) * f0 * f2
+                dM[c, 2] = (1.0 if c & 4 else -1.0) * f0 * f1
+            for k in range(3):
+                for i in range(3):
+                    v = 0.0
+                    for c in range(8):
+                        v += corners[p, c, i] * dM[c, k]
+                    J[k, i] = v
+            for k in range(3):
+                u, v = J[(k + 1) % 3], J[(k + 2) % 3]
+                cof[k, 0] = u[1] * v[2] - u[2] * v[1]
+                cof[k, 1] = u[2] * v[0] - u[0] * v[2]
+                cof[k, 2] = u[0] * v[1] - u[1] * v[0]
+            det = J[0, 0] * cof[0, 0] + J[0, 1] * cof[0, 1] + J[0, 2] * cof[0, 2]
+            for c in range(8):
+                w_out[p, c] += 0.125 * M[c] * det
+                for i in range(3):
+                    g_out[p, c, i] += 0.125 * (dM[c, 0] * cof[0, i] + dM[c, 1] * cof[1, i]
+                                               + dM[c, 2] * cof[2, i])
+        V = 0.0
+        for c in range(8):
+            V += w_out[p, c]
+        vmin = min(vmin, V)
+    return vmin
+
+
+@njit(parallel=PRANGE, cache=True)
+def corner_weights3(corners, w_out, g_out):
+    """3D CPDI2 (hexahedral domains, corners (n, 8, 3) in tensor order): w_c = int M_c dx and
+    g_c = int grad M_c dx = int cof(J) grad_xi M_c dxi (cof(J) = det J J^-T, rows
+    J_(k+1) x J_(k+2)), both by 2 x 2 x 2 Gauss points, exact for the trilinear map (the
+    integrands are at most cubic per reference direction). Returns the smallest volume."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _corner_weights3(corners, w_out, g_out, np.int64(0), n)
+    vmin = np.empty(nc)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        vmin[c] = _corner_weights3(corners, w_out, g_out, lo, hi)
+    return vmin.min()
+
+
+@njit(cache=True)
+def _tet_corners(x, F, r0, corners_out, lo, hi):
+    for p in range(lo, hi):
+        for c in range(4):
+            for i in range(3):
+                corners_out[p, c, i] = (x[p, i] + F[p, i, 0] * r0[p, c, 0] + F[p, i, 1] * r0[p, c, 1]
+                                        + F[p, i, 2] * r0[p, c, 2])
+
+
+@njit(parallel=PRANGE, cache=True)
+def tet_corners(x, F, r0, corners_out):
+    """Corners of tetrahedral CPDI1 domains: x_c = x_p + F_p r_c^0 (r0 (n, 4, 3), the initial
+    corner offsets from the centroid, sum_c r_c^0 = 0)."""
+    n = x.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _tet_corners(x, F, r0, corners_out, np.int64(0), n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _tet_corners(x, F, r0, corners_out, lo, hi)
+
+
+@njit(cache=True)
+def _tet_weights(corners, w_out, g_out, lo, hi):
+    vmin = np.inf
+    e = np.empty((3, 3))
+    for p in range(lo, hi):
+        for k in range(3):
+            for i in range(3):
+                e[k, i] = corners[p, k + 1, i] - corners[p, 0, i]
+        for k in range(3):                          # g_(k+1) = (e_(k+1) x e_(k+2)) / 6
+            u, v = e[(k + 1) % 3], e[(k + 2) % 3]
+            g_out[p, k + 1, 0] = (u[1] * v[2] - u[2] * v[1]) / 6.0
+            g_out[p, k + 1, 1] = (u[2] * v[0] - u[0] * v[2]) / 6.0
+            g_out[p, k + 1, 2] = (u[0] * v[1] - u[1] * v[0]) / 6.0
+        for i in range(3):
+            g_out[p, 0, i] = -(g_out[p, 1, i] + g_out[p, 2, i] + g_out[p, 3, i])
+        V = e[0, 0] * g_out[p, 1, 0] + e[0, 1] * g_out[p, 1, 1] + e[0, 2] * g_out[p, 1, 2]
+        for c in range(4):
+            w_out[p, c] = 0.25 * V
+        vmin = min(vmin, V)
+    return vmin
+
+
+@njit(parallel=PRANGE, cache=True)
+def tet_weights(corners, w_out, g_out):
+    """Tetrahedral domains (corners (n, 4, 3), positively oriented), linear M_c:
+    w_c = V_p / 4, g_c = V_p grad M_c: g_k = (e_(k+1) x e_(k+2)) / 6 for k = 1..3 (e_k =
+    x_k - x_0, cyclic), g_0 = -(g_1 + g_2 + g_3), V_p = e_1 . (e_2 x e_3) / 6 (Sadeghirad et
+    al. 2013, tetrahedral CPDI2 domains). Returns the smallest V_p."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _tet_weights(corners, w_out, g_out, np.int64(0), n)
+    vmin = np.empty(nc)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        vmin[c] = _tet_weights(corners, w_out, g_out, lo, hi)
+    return vmin.min()
+
+
+def initial_tets(grid, particles):
+    """Initial tetrahedral domains (n, 4, 3) as offsets from x_p: the particle's cell shrunk
+    about its centroid to volume V0_p, r_c^0 = (V0_p / V_cell)^(1/3) (X_c - X_centroid),
+    vertices 1 and 2 swapped where the cell is negatively oriented. With one particle per
+    cell (Particles.fill(per_cell=1)) the domains are the cells: they tile the body."""
+    X = grid.node_x[grid.cell_nodes[particles.cell]]           # (n, 4, 3)
+    e = X[:, 1:] - X[:, :1]
+    det = np.linalg.det(e) if len(X) else np.zeros(0)
+    flip = det < 0
+    X[flip, 1], X[flip, 2] = X[flip, 2].copy(), X[flip, 1].copy()
+    s = np.cbrt(particles.V0 / (np.abs(det) / 6.0))
+    return (X - X.mean(axis=1, keepdims=True)) * s[:, None, None]
+
+
 @njit(cache=True)
 def _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, hi):
     d = len(D)
     nv = nodes_out.shape[1]
+    ncor = w.shape[1]
     for p in range(lo, hi):
-        V = w[p, 0] + w[p, 1] + w[p, 2] + w[p, 3]
+        V = 0.0
+        for c in range(ncor):
+            V += w[p, c]
         cnt = 0
-        for c in range(4):
+        for c in range(ncor):
             for a in range(cnodes.shape[2]):
                 s = cN[p, c, a]
                 if s == 0.0:
@@ -150,8 +378,8 @@ def _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, 
 def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
     """phi_ip and grad phi_ip from the corner shape functions (see the module docstring).
 
-    cnodes, cN: (n, 4, nvc) grid nodes and standard shape values at each corner; w (n, 4),
-    g (n, 4, 2) from corner_weights. Nodes shared by several corners are merged: each node
+    cnodes, cN: (n, nc, nvc) grid nodes and standard shape values at each of the nc corners
+    (4 in 2D, 8 in 3D); w (n, nc), g (n, nc, gdim) from corner_weights/corner_weights3. Nodes shared by several corners are merged: each node
     appears once (count_out[p] of them), then padding (a valid node with N = dN = 0)."""
     n = cnodes.shape[0]
     nc = particle_chunks(n)
@@ -166,7 +394,7 @@ def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
 def _move_corners(D, cnodes, cN, du, corners, lo, hi):
     d = len(D)
     for p in range(lo, hi):
-        for c in range(4):
+        for c in range(corners.shape[1]):
             for a in range(cnodes.shape[2]):
                 i = cnodes[p, c, a]
                 for k in range(d):
@@ -186,51 +414,69 @@ def move_corners(D, cnodes, cN, du, corners):
 
 
 def initial_edges(grid, particles):
-    """CPDI1 edge vectors r_k^0 (n, 2, 2) of area V0_p: on quadrilaterals the particle's cell
-    edges e_k = x_(vertex 2^k) - x_(vertex 0) scaled by sqrt(V0_p / |e1 x e2|) (for
-    Particles.fill with n per direction: e_k / n on parallelogram cells); on triangles an
-    axis-aligned square of side sqrt(V0_p)."""
+    """CPDI1 edge vectors r_k^0 (n, d, d) of volume V0_p: on quadrilaterals/hexahedra the
+    particle's cell edges e_k = x_(vertex 2^k) - x_(vertex 0) scaled by (V0_p / |det e|)^(1/d)
+    (for Particles.fill with n per direction: e_k / n on parallelogram/parallelepiped cells),
+    with e1, e2 swapped where det e < 0; on triangles/tetrahedra an axis-aligned square/cube of
+    side V0_p^(1/d)."""
     from . import standard as ks
-    n = len(particles)
-    r0 = np.zeros((n, 2, 2))
+    n, d = len(particles), grid.gdim
+    r0 = np.zeros((n, d, d))
     if grid.kind == ks.SIMPLEX:
-        s = np.sqrt(particles.V0)
-        r0[:, 0, 0] = s
-        r0[:, 1, 1] = s
+        s = particles.V0 ** (1.0 / d)
+        for k in range(d):
+            r0[:, k, k] = s
         return r0
     cn = grid.cell_nodes[particles.cell]
-    e1 = grid.node_x[cn[:, 1]] - grid.node_x[cn[:, 0]]
-    e2 = grid.node_x[cn[:, 2]] - grid.node_x[cn[:, 0]]
-    cross = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    s = np.sqrt(particles.V0 / np.abs(cross))
-    flip = cross < 0                          # keep r1 x r2 > 0 (corners counter-clockwise)
-    r0[:, 0] = np.where(flip[:, None], e2, e1) * s[:, None]
-    r0[:, 1] = np.where(flip[:, None], e1, e2) * s[:, None]
+    e = np.stack([grid.node_x[cn[:, 1 << k]] - grid.node_x[cn[:, 0]] for k in range(d)], axis=1)
+    det = np.linalg.det(e) if n else np.zeros(0)
+    s = (particles.V0 / np.abs(det)) ** (1.0 / d)
+    flip = det < 0                            # keep det [r1 .. rd] > 0 (positive orientation)
+    r0[:, 0] = np.where(flip[:, None], e[:, 1], e[:, 0]) * s[:, None]
+    r0[:, 1] = np.where(flip[:, None], e[:, 0], e[:, 1]) * s[:, None]
+    if d == 3:
+        r0[:, 2] = e[:, 2] * s[:, None]
     return r0
 
 
 class CpdiShape:
-    """CPDI1 (version 1) or CPDI2 (version 2, quadrilateral domains) for a 2D Simulation.
+    """CPDI1 (version 1) or CPDI2 (version 2) for a 2D or 3D Simulation: parallelogram /
+    parallelepiped domains (CPDI1), quadrilateral / hexahedral domains (CPDI2).
 
-    Adds the particle field `cpdi_r0` (n, 2, 2), the initial edge vectors (initial_edges),
-    and for CPDI2 `cpdi_corners` (n, 4, 2), started as the CPDI1 parallelograms. A corner
+    Adds the particle field `cpdi_r0` (n, d, d), the initial edge vectors (initial_edges),
+    and for CPDI2 `cpdi_corners` (n, 4, 2) or (n, 8, 3), started as the CPDI1 domains. A corner
     outside the mesh (a particle at the boundary) uses the basis of the particle's own cell,
     extended linearly: the weights still sum to 1 and reproduce affine fields."""
 
     def __init__(self, sim, version):
         from .gimp import _RING_MESSAGE
         grid, p = sim.grid, sim.particles
-        if grid.gdim != 2:
-            raise NotImplementedError(f"CPDI shape functions are implemented in 2D only, "
-                                      f"got gdim = {grid.gdim}")
+        d = grid.gdim
+        if d not in (2, 3):
+            raise NotImplementedError(f"CPDI shape functions are implemented in 2D and 3D, "
+                                      f"got gdim = {d}")
         if not grid.has_vertex_ring():
             raise ValueError(_RING_MESSAGE.format(name="CPDI"))
+        from . import standard as ks
         self.version = int(version)
-        if not hasattr(p, "cpdi_r0"):
-            p.add_field("cpdi_r0", (2, 2))[:] = initial_edges(grid, p)
+        self.d = d
+        self.tets = d == 3 and grid.kind == ks.SIMPLEX and TET_DOMAINS
+        self.n_corners = N_CORNERS if d == 2 else 4 if self.tets else N_CORNERS_3D
+        if self.tets and not hasattr(p, "cpdi_t0"):
+            p.add_field("cpdi_t0", (4, 3))[:] = initial_tets(grid, p)
+        if not self.tets and not hasattr(p, "cpdi_r0"):
+            p.add_field("cpdi_r0", (d, d))[:] = initial_edges(grid, p)
         if self.version == 2 and not hasattr(p, "cpdi_corners"):
-            cpdi1_corners(p.x, p.F, p.cpdi_r0, p.add_field("cpdi_corners", (N_CORNERS, 2)))
+            self._cpdi1_corners(p, p.add_field("cpdi_corners", (self.n_corners, d)))
         self._corner_shape = None
+
+    def _cpdi1_corners(self, p, out):
+        if self.tets:
+            tet_corners(p.x, p.F, p.cpdi_t0, out)
+        elif self.d == 2:
+            cpdi1_corners(p.x, p.F, p.cpdi_r0, out)
+        else:
+            cpdi1_corners3(p.x, p.F, p.cpdi_r0, out)
 
     def before_locate(self, sim):
         """CPDI2: move the corners with the last step's grid displacement dt v_i (the nodal
@@ -245,26 +491,28 @@ class CpdiShape:
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
         particle's corners reach (padded)."""
         p, g = sim.particles, sim.grid
-        n, nvc = len(p), g.cell_nodes.shape[1]
+        n, nvc, d, ncor = len(p), g.cell_nodes.shape[1], self.d, self.n_corners
         if self.version == 2:
             corners = p.cpdi_corners
         else:
-            corners = np.empty((n, N_CORNERS, 2))
-            cpdi1_corners(p.x, p.F, p.cpdi_r0, corners)
+            corners = np.empty((n, ncor, d))
+            self._cpdi1_corners(p, corners)
         cnodes, cN, _ = shape_at_points(g, corners, p.cell)
-        cnodes = cnodes.reshape(n, N_CORNERS, nvc)
-        cN = cN.reshape(n, N_CORNERS, nvc)
-        w = np.empty((n, N_CORNERS))
-        gc = np.empty((n, N_CORNERS, 2))
-        if n and corner_weights(corners, w, gc) <= 0.0:
+        cnodes = cnodes.reshape(n, ncor, nvc)
+        cN = cN.reshape(n, ncor, nvc)
+        w = np.empty((n, ncor))
+        gc = np.empty((n, ncor, d))
+        weights = (corner_weights if d == 2 else tet_weights if self.tets else
+                   parallelepiped_weights if self.version == 1 else corner_weights3)
+        if n and weights(corners, w, gc) <= 0.0:
             bad = int(np.argmin(w.sum(axis=1)))
             raise RuntimeError(f"CPDI: the domain of particle {int(p.id[bad])} at "
                                f"{np.round(p.x[bad], 6).tolist()} has turned inside out "
-                               f"(area {w[bad].sum():.3g})")
-        width = N_CORNERS * nvc
+                               f"({'area' if d == 2 else 'volume'} {w[bad].sum():.3g})")
+        width = ncor * nvc
         nodes = np.empty((n, width), dtype=np.int32)
         N = np.empty((n, width))
-        dN = np.empty((n, width, 2))
+        dN = np.empty((n, width, d))
         count = np.empty(n, dtype=np.int64)
         cpdi_combine(g.D, cnodes, cN, w, gc, nodes, N, dN, count)
         self._corner_shape = (cnodes, cN)
@@ -272,24 +520,25 @@ class CpdiShape:
 
 
 def shape_at_points(g, points, cells_hint):
-    """Standard-MPM (nodes, N, dN) at points (n, k, 2) of n particles, flattened to n k rows.
-    A point outside the local mesh uses its particle's cell (`cells_hint`), extended linearly."""
+    """Standard-MPM (nodes, N, dN) at points (n, k, gdim) of n particles, flattened to n k
+    rows. A point outside the local mesh uses its particle's cell (`cells_hint`), extended
+    linearly."""
     from . import standard as ks
-    n, k = points.shape[:2]
+    n, k, d = points.shape
     nvc = g.cell_nodes.shape[1]
-    flat = np.ascontiguousarray(points.reshape(-1, 2))
+    flat = np.ascontiguousarray(points.reshape(-1, d))
     hint = np.repeat(cells_hint, k)
     cells, xi = g.locate(flat, hint)
     lost = np.flatnonzero(cells < 0)
     if len(lost):
         cells[lost] = hint[lost]
-        xl = np.empty((len(lost), 2))
+        xl = np.empty((len(lost), d))
         ks.pull_back(g.kind, np.ascontiguousarray(flat[lost]), cells[lost], g.cell_nodes,
                      g.node_x, g.affine_Jinv, xl, np.empty(len(lost), dtype=np.bool_))
         xi[lost] = xl
     nodes = np.empty((n * k, nvc), dtype=np.int32)
     N = np.empty((n * k, nvc))
-    dN = np.empty((n * k, nvc, 2))
+    dN = np.empty((n * k, nvc, d))
     ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad, g.affine_Jinv,
                  nodes, N, dN)
     return nodes, N, dN
