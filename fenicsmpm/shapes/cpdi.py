@@ -122,7 +122,6 @@ def corner_weights(corners, w_out, g_out):
 # Corners of a hexahedral domain in the tensor (dolfinx) order: corner c = b0 + 2 b1 + 4 b2
 # sits at reference point (b0, b1, b2) of the trilinear map, M_c = prod_k (b_k ? s_k : 1 - s_k).
 N_CORNERS_3D = 8
-TET_DOMAINS = True
 
 
 @njit(cache=True)
@@ -460,7 +459,7 @@ class CpdiShape:
         from . import standard as ks
         self.version = int(version)
         self.d = d
-        self.tets = d == 3 and grid.kind == ks.SIMPLEX and TET_DOMAINS
+        self.tets = d == 3 and grid.kind == ks.SIMPLEX
         self.n_corners = N_CORNERS if d == 2 else 4 if self.tets else N_CORNERS_3D
         if self.tets and not hasattr(p, "cpdi_t0"):
             p.add_field("cpdi_t0", (4, 3))[:] = initial_tets(grid, p)
