@@ -10,6 +10,7 @@ from .boundaries import ParticleLayer, Robin, RobinForms, Traction, fixed_dofs
 from .boundaries.friction import FrictionalBoundary
 from .boundaries.robin import facets_on_boundary
 from .io import Probe
+from .io.probe import ReactionProbe
 from .shapes import SHAPES
 from .kernels import transfer as kt
 from .splitting import Splitting
@@ -232,6 +233,18 @@ class SetupMixin:
         "acceleration" is (v_new - v_old) / dt of the particle with explicit integrators and
         the Newmark/generalized-alpha particle acceleration with implicit ones."""
         pr = Probe(self, point, fields, path, every)
+        self.probes.append(pr)
+        return pr
+
+    def probe_reaction(self, where=None, path=None, every=1):
+        """Record the reaction force of the fixed or moved nodes at where(x) (default: all
+        fixed nodes), sim.reaction(where), every `every` steps; CSV at `path` (columns t,
+        reaction_x, reaction_y[, reaction_z]). Returns the probe; `probe.data()` (collective)
+        the series. Needs an integrator that reports reactions (fm.Explicit, fm.QuasiStatic)."""
+        if not getattr(self.integrator, "reports_reaction", False):
+            raise ValueError(f"probe_reaction: {type(self.integrator).__name__} reports no "
+                             f"reaction (fm.Explicit and the implicit integrators do)")
+        pr = ReactionProbe(self, where, path, every)
         self.probes.append(pr)
         return pr
 

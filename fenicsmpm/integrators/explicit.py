@@ -51,6 +51,7 @@ class Explicit:
     particle acceleration a = (v_new - v_old) / dt."""
     explicit = True
     records_work = True
+    reports_reaction = True             # sim.nodal["reaction"] after each step
     supports_friction = True
 
     def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None):

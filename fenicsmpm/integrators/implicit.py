@@ -31,6 +31,7 @@ from .linear_system import DEFAULT_PREFIX, LinearSystem, stencil_rings
 
 class _Newton:
     explicit = False
+    reports_reaction = True             # sim.nodal["reaction"] after each step
 
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
                  prefix=DEFAULT_PREFIX):

@@ -139,3 +139,37 @@ class Probe:
             w.close()
         if comm.size > 1:
             comm.barrier()
+
+
+class ReactionProbe(Probe):
+    """Time series of the reaction force of the fixed (or moved) nodes at where(x) (all fixed
+    nodes for where=None): columns t, reaction_x, reaction_y[, reaction_z], the value of
+    Simulation.reaction(where) after each recorded step (made by Simulation.probe_reaction).
+    Recording is collective (a sum over ranks); rank 0 keeps the rows and writes the CSV."""
+
+    def __init__(self, sim, where, path, every):
+        if not (isinstance(every, (int, np.integer)) and not isinstance(every, bool) and every >= 1):
+            raise ValueError(f"probe_reaction: 'every' must be a positive integer, got {every!r}")
+        if where is not None:
+            sim.grid.nodes_where(where)               # checks the locator once
+        self.sim, self.where, self.every = sim, where, int(every)
+        self.fields = ["reaction"]
+        self.columns = ["t"] + [f"reaction_{c}" for c in "xyz"[: sim.gdim]]
+        self.rows, self.path, self.writer, self._version = [], path, None, 0
+        if path:
+            self.rewrite_csv([])
+            self.writer = ProbeWriter(path, self.columns, sim.comm, append=True)
+
+    def __str__(self):
+        return f"reaction probe at {'all fixed nodes' if self.where is None else 'where(x)'}"
+
+    def record(self):
+        """Append t and the reaction of the last step (every `every` steps; collective)."""
+        if self.sim.step_count % self.every or "reaction" not in self.sim.nodal:
+            return
+        r = self.sim.reaction(self.where)
+        if self.sim.comm.rank == 0:
+            row = [self.sim.t] + [float(v) for v in r]
+            self.rows.append(row)
+            if self.writer is not None:
+                self.writer.write_row(row)
