@@ -316,7 +316,7 @@ class SetupMixin:
             raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
         if fbar not in (True, False):
             raise ValueError(f"Simulation: 'fbar' must be True or False, got {fbar!r}")
-        if fbar and not self.integrator.explicit:
-            raise NotImplementedError("Simulation: fbar=True needs an explicit integrator (the "
-                                      "implicit tangent of F-bar is not implemented)")
+        if fbar and getattr(self.integrator, "double_mapping", False):
+            raise NotImplementedError("Simulation: fbar=True is not implemented for the "
+                                      "double-mapping (DM-GC) integrators")
         self.fbar = bool(fbar)

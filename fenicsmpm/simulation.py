@@ -64,9 +64,11 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings).
     force_integration: "particles" (the internal force as a particle sum), or "mixed" (MPM
     with Gauss-point integration of the internal force, fenicsmpm.integrators.mixed_integration).
-    fbar: explicit integrators only: the incremental deformation gradient's volume change is
-    averaged over each cell (kernels.fbar, F-bar) against volumetric locking under isochoric
-    plastic flow (the Prandtl footing's limit pressure, problems.footing).
+    fbar: the incremental deformation gradient's volume change is averaged over each cell
+    (kernels.fbar, F-bar) against volumetric locking under isochoric plastic flow (the Prandtl
+    footing's limit pressure, problems.footing); explicit integrators, and implicit ones with
+    the standard shape family on plane or 3D grids (F-bar's consistent, unsymmetric tangent,
+    kernels.fbar.fbar_stiffness); not the DM-GC integrators.
     Axisymmetric analysis is a property of the grid (fm.Grid(mesh, axisymmetric=True),
     fenicsmpm.kernels.axisymmetric): hoop terms are added to the strain, force and tangent, and the
     radial displacement of nodes on the axis r = 0 is fixed."""

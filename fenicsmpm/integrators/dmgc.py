@@ -131,6 +131,7 @@ def dm_assemble(Dn, cells, elem_nodes, elem_plan, Ng, dNg, detJW, nodeptr, const
 
 
 class _DoubleMapping:
+    double_mapping = True               # Simulation(fbar=True) refuses these integrators
     """DM-GC hooks for an implicit integrator (module docstring): CMPM strain increments and
     the double-mapped Gauss-point stiffness."""
 

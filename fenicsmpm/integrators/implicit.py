@@ -54,12 +54,27 @@ class _Newton:
     def setup(self, sim):
         """Build the PETSc linear system on the grid (integrator protocol: called once)."""
         shape = getattr(sim, "shape", "mpm")        # wide shapes: a pattern over cell rings
+        if sim.fbar and (shape != "mpm" or sim.axisymmetric or sim.layers):
+            raise NotImplementedError(
+                f"{type(self).__name__}: fbar=True needs the standard shape family (shape='mpm' "
+                f"or 'auto'), a plane or 3D grid and no particle layers (its tangent couples the "
+                f"particles of a cell through the cell's nodes; got shape={shape!r}"
+                f"{', an axisymmetric grid' if sim.axisymmetric else ''}"
+                f"{', particle layers' if sim.layers else ''})")
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape)
 
     def strain_increment(self, sim, du):
-        """sim._dF <- I + sum_i du_i (x) grad N_ip (the step's incremental deformation gradient)."""
-        sim.incremental_F(du, 1.0, sim._dF)
+        """sim._dF <- I + sum_i du_i (x) grad N_ip (the step's incremental deformation gradient);
+        with F-bar the increment before averaging is kept in self._dF0 for the tangent."""
+        if not sim.fbar:
+            sim.incremental_F(du, 1.0, sim._dF)
+            return
+        if getattr(self, "_dF0", None) is None or self._dF0.shape != sim._dF.shape:
+            self._dF0 = np.empty_like(sim._dF)
+        kt.incremental_F(sim.grid.D, sim.nodes, sim.dN, du, 1.0, self._dF0)
+        sim._dF[:] = self._dF0
+        sim.average_volume_change(sim._dF)
 
     def assemble_tangent(self, sim, A4, plan, diag_add, constrained, extra=None):
         """K = sum_p V_p B^T A_p B + diag(diag_add) (+ extra terms, + the hoop terms of
@@ -70,8 +85,11 @@ class _Newton:
                                    self.system.nodeptr, constrained, data)
                 if more is not None:
                     more(data)
+        fb = None
+        if sim.fbar:
+            fb = (self._dF0, sim.particles.cell, sim.grid.n_cells, 3 if sim.gdim == 3 else 2)
         self.system.assemble(sim.nodes, sim.dN, sim.particles.V, A4, plan, diag_add, constrained,
-                             extra)
+                             extra, fb)
 
     def _norm(self, sim, r):
         own = r[: sim.grid.n_owned_nodes]

@@ -11,6 +11,7 @@ from petsc4py import PETSc
 
 from ..shapes import standard as kt_shape
 from ..kernels import transfer as kt
+from ..kernels.fbar import fbar_stiffness
 
 DEFAULT_PREFIX = "fenicsmpm_"
 
@@ -116,11 +117,18 @@ class LinearSystem:
                 f"use fewer particles per cell or shape='ugimp'/'cpdi1'; the term is not dropped")
         return plan
 
-    def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained, extra=None):
+    def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained, extra=None, fbar=None):
         """Fill K = sum_p V_p B^T A_p B + diag(diag_add) with unit rows on constrained dofs;
-        extra(data), if given, adds further particle terms to the local CSR values."""
+        extra(data), if given, adds further particle terms to the local CSR values. With
+        fbar = (dF0, cell, n_cells, n) the particle term is F-bar's consistent tangent
+        (kernels.fbar.fbar_stiffness) instead."""
         self.data[:] = 0.0
-        kt.assemble_stiffness(self.grid.D, nodes, dN, V, A4, plan, self.nodeptr, constrained, self.data)
+        if fbar is None:
+            kt.assemble_stiffness(self.grid.D, nodes, dN, V, A4, plan, self.nodeptr, constrained,
+                                  self.data)
+        else:
+            fbar_stiffness(self.grid.D, nodes, dN, V, A4, *fbar, plan, self.nodeptr, constrained,
+                           self.data)
         if extra is not None:
             extra(self.data)
         own = self.n_owned_dofs

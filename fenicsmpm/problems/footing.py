@@ -17,11 +17,12 @@ PRANDTL = 2.0 + np.pi
 
 
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
-                  shape="auto", fbar=None, comm=None):
+                  shape="auto", fbar=None, mu=0.0, comm=None):
     """The scene: (sim, pressure, settlement): pressure() -> q / ((2 + pi) c_u) of the last
     step (from the global contact force; the same on every rank), settlement(t) the
     footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
-    default)."""
+    default); mu: the footing-soil friction coefficient (0: smooth; a rough footing, e.g.
+    mu = 10, has the same Prandtl limit on weightless Tresca soil)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
@@ -47,7 +48,7 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
         return speed * (ramp * (s ** 3 - 0.5 * s ** 4) + max(t - ramp, 0.0))
 
     kw = {} if fbar is None else dict(fbar=fbar)
-    integ = fm.ExplicitContact(scheme, mu=0.0, rigid={1: velocity})
+    integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity})
     sim = fm.Simulation(grid, pts, integ, dt="auto", shape=shape, **kw)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], width), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))

@@ -26,9 +26,11 @@ __all__ = ["W5_SOIL", "soil", "shear_layer", "shear_layer_simulation", "strip_fo
 W5_SOIL = dict(E=2.0e6, nu=0.41, density=1000.0, c_u=10.0e3, c_res=3.0e3, H=-140.0e3)
 
 
-def soil(length=None, m=2.0):
-    """The W5 von Mises clay, regularised with internal length `length` (None: local)."""
-    return VonMises(**W5_SOIL, nonlocal_length=length, nonlocal_m=m)
+def soil(length=None, m=2.0, softening=True):
+    """The W5 von Mises clay, regularised with internal length `length` (None: local);
+    softening=False keeps the peak strength c_u (perfectly plastic)."""
+    kw = dict(W5_SOIL) if softening else dict(W5_SOIL, c_res=W5_SOIL["c_u"], H=0.0)
+    return VonMises(**kw, nonlocal_length=length if softening else None, nonlocal_m=m)
 
 
 def _gsum(comm, x):
@@ -119,7 +121,7 @@ def prandtl_band_length(half_width):
 
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
-                  half_width=0.25, m=2.0, cuts=3):
+                  half_width=0.25, m=2.0, cuts=3, softening=True, fbar=False):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
     size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
@@ -129,7 +131,9 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     pressure-settlement curve (p = vertical reaction / (B/2)), the final eps_p field, the band
     width w = sum_p V_p eps_p / (eps_p,max L), L = prandtl_band_length(B/2), Newton
     iterations, completed/stop message and the time split (step wall, nonlocal).  A step
-    whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts)."""
+    whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts).
+    softening=False: the perfectly plastic soil (peak strength); fbar: Simulation(fbar=...)
+    (F-bar with its consistent tangent, kernels.fbar)."""
     from mpi4py import MPI
     comm = MPI.COMM_WORLD if comm is None else comm
     top = depth + max(2.0 * h, 0.25)               # empty cells above the soil for the heave
@@ -138,11 +142,12 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
                                  dmesh.CellType.quadrilateral)
     grid = Grid(msh)
     tol = 1e-6 * h
-    pts = Particles.fill(grid, soil(length, m), per_cell=2, region=lambda x: x[:, 1] < depth)
+    pts = Particles.fill(grid, soil(length, m, softening), per_cell=2,
+                         region=lambda x: x[:, 1] < depth)
     under = lambda x: (np.abs(x[:, 1] - depth) < tol) & (x[:, 0] <= half_width + tol)
     qs = QuasiStatic(displacement=lambda x, t: np.column_stack(
         [np.zeros(len(x)), np.where(under(x), -settlement * t, 0.0)]))
-    sim = Simulation(grid, pts, qs, dt=1.0 / steps, max_dt_cuts=cuts)
+    sim = Simulation(grid, pts, qs, dt=1.0 / steps, max_dt_cuts=cuts, fbar=fbar)
     sim.fix(lambda x: np.abs(x[:, 1]) < tol)
     sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - width) < tol), [0])
     sim.fix(under, [1])
