@@ -69,7 +69,8 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, con
         Hbar_b = sum_q V_q J_q h_qb / sum_q V_q J_q,
     (de Souza Neto et al. 1996 eq 24 in increment form) and the block of nodes (a, b)
         K_ab[r, c] = V_p grad N_ap,J A_p[r, J, K, L] d dFbar_p[K, L] / d u_b,c
-    with K, L < n in the averaging term (the in-plane block in plane strain)."""
+    with K, L < n in the averaging term (the in-plane block in plane strain); a particle
+    whose J_p or Jbar is not positive is not averaged (fbar) and gets the plain block."""
     d = len(D)
     nv = nodes.shape[1]
     sv = np.zeros(n_cells)
@@ -94,7 +95,8 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, con
     hp = np.empty((nv, d))
     for p in range(nodes.shape[0]):
         c = cell[p]
-        s = (sj[c] / sv[c] / J[p]) ** (1.0 / n)
+        avg = J[p] > 0.0 and sj[c] > 0.0             # as fbar(): no averaging otherwise
+        s = (sj[c] / sv[c] / J[p]) ** (1.0 / n) if avg else 1.0
         _inv_det(dF0[p], inv)
         for a in range(nv):
             for k in range(d):
@@ -122,6 +124,7 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, con
                         for Jx in range(d):
                             for L in range(d):
                                 v += dN[p, a, Jx] * A[p, r, Jx, cc, L] * dN[p, b, L]
-                        v += qa * (Hb[c, b, cc] / sj[c] - hp[b, cc])
+                        if avg:
+                            v += qa * (Hb[c, b, cc] / sj[c] - hp[b, cc])
                         block[r, cc] = V[p] * s * v
                 add_block(data, plan[p, a, b], deg, i, nodes[p, b], d, constrained, block)
