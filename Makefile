@@ -13,7 +13,7 @@ MPIRUN := mpirun $(MPI_ROOT) -n $(NP)
 export OMPI_MCA_rmaps_base_oversubscribe = 1
 export OMPI_MCA_btl_vader_single_copy_mechanism = none
 
-.PHONY: all deps venv test test-serial test-mpi docs demo bench clean
+.PHONY: all deps deps-optional venv test test-serial test-mpi docs demo bench clean
 
 all: test
 
@@ -28,6 +28,19 @@ deps:
 	  $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq $$missing; \
 	fi
 
+# Optional: pytest-xdist runs the serial pass on two worker processes (one per core). If it
+# cannot be installed the serial pass runs in one process, as before.
+deps-optional: deps
+	@dpkg-query -W -f='$${Status}' python3-pytest-xdist 2>/dev/null | grep -q "install ok installed" || \
+	  { echo "[make] installing python3-pytest-xdist (optional)"; \
+	    { $(SUDO) apt-get update -qq && \
+	      $(SUDO) env DEBIAN_FRONTEND=noninteractive apt-get install -y -qq python3-pytest-xdist; } || \
+	    echo "[make] python3-pytest-xdist not available: the serial pass runs in one process"; }
+
+# The serial pass on 2 workers, each test file on one worker (module fixtures run once);
+# empty without pytest-xdist. Expanded when the recipe runs, after deps-optional.
+XDIST = $(shell $(PY) -c "import xdist" 2>/dev/null && echo "-n $(NP) --dist loadfile")
+
 # Virtual environment that sees the Debian packages, with fenicsmpm installed editable.
 $(VENV)/.installed: pyproject.toml | deps
 	@test -x $(PY) || $(SYS_PYTHON) -m venv --system-site-packages $(VENV)
@@ -36,13 +49,13 @@ $(VENV)/.installed: pyproject.toml | deps
 
 venv: $(VENV)/.installed
 
-test: $(VENV)/.installed
-	$(PY) -m pytest -q --color=no tests
+test: $(VENV)/.installed deps-optional
+	$(PY) -m pytest -q --color=no $(XDIST) tests
 	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
 	$(MAKE) --no-print-directory docs
 
-test-serial: $(VENV)/.installed
-	$(PY) -m pytest -q --color=no tests
+test-serial: $(VENV)/.installed deps-optional
+	$(PY) -m pytest -q --color=no $(XDIST) tests
 
 test-mpi: $(VENV)/.installed
 	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
@@ -59,4 +72,4 @@ bench: $(VENV)/.installed
 	$(PY) -m fenicsmpm.bench $(CASE)
 
 clean:
-	rm -rf $(VENV) results bench-results *.egg-info docs/_build docs/_generated
+	rm -rf $(VENV) results bench-results *.egg-info docs/_build docs/_generated .numba-cache-*

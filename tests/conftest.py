@@ -3,10 +3,19 @@
 Every test runs the same code path on every rank: global quantities are reduced first
 (`Particles.total`, `Probe.data()`, `comm.allreduce`) and only then asserted, so a failing
 assertion fails on all ranks together and never leaves a rank waiting in a collective."""
+import os
 import shutil
 import tempfile
 
-import numpy as np
+# Under pytest-xdist (`make test`'s serial pass) the second worker compiles into its own
+# numba cache: numba's cache index is not safe against two processes adding different
+# signatures of one function at once. Set before numba is first imported.
+_WORKER = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+if _WORKER != "gw0":
+    os.environ["NUMBA_CACHE_DIR"] = os.path.join(os.path.dirname(os.path.dirname(
+        os.path.abspath(__file__))), f".numba-cache-{_WORKER}")
+
+import numpy as np  # noqa: E402
 import pytest
 from mpi4py import MPI
 
