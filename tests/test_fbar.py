@@ -121,3 +121,25 @@ def test_implicit_fbar_tangent_matches_finite_differences(plastic):
     print(f"\nF-bar tangent ({'plastic' if plastic else 'elastic'}): FD error {err:.1e}, "
           f"asymmetry {np.abs(K - K.T).max() / np.abs(K).max():.3f}")
     assert err < 1e-7, err
+
+
+def test_implicit_fbar_w5_footing_reaches_prandtl():
+    """The seed 000 W5 strip footing (problems.localisation.strip_footing: weightless von
+    Mises clay at its peak strength c_u = 10 kPa, nu = 0.41, smooth footing B/2 = 0.25 m under
+    displacement control, fm.QuasiStatic) at h = 0.125 m, pushed 60 mm in 30 steps. With
+    F-bar (its consistent tangent: 4.5 Newton iterations per step on average, at most 6) the
+    pressure levels off below Prandtl's (2 + pi) c_u: from 30 mm on its mean is 0.929 (within
+    10 %), every step between 0.878 and 0.960 (within 15 %); without it the locked particles
+    carry 1.249 at 60 mm and still rise (1.050 at 30 mm)."""
+    from fenicsmpm.problems.localisation import strip_footing
+    prandtl = 10e3 * (2.0 + np.pi)
+    q = {}
+    for fb in (True, False):
+        r = strip_footing(0.125, softening=False, fbar=fb, settlement=0.06, steps=30)
+        assert r["completed"], r["stopped"]
+        q[fb] = r["pressure"] / prandtl
+        if fb:
+            assert np.mean(r["newton"]) < 6 and max(r["newton"]) <= 8, r["newton"]
+    late = q[True][15:]                                   # from 30 mm on
+    assert abs(late.mean() - 1.0) < 0.10 and np.all(np.abs(late - 1.0) < 0.15), late
+    assert q[False][-1] > 1.2 and q[False][-1] > q[False][20], q[False]
