@@ -46,42 +46,40 @@ NS = 3          # nodes per axis of a particle's window
 
 
 @njit(cache=True)
-def _add(S, dS, q, w, g):
-    S[q] += w
-    dS[q] += g
-
-
-@njit(cache=True)
 def bspline_1d(x, origin, L, n, S, dS):
     """Boundary-modified quadratic B-spline weights (S) and d/dx (dS) at x of the 3 lattice
     nodes j0, j0 + 1, j0 + 2 (global lattice indices from `origin`, n cells on the axis);
-    returns j0. For n = 1 the third entry (node 2, not a grid node) gets 0."""
+    returns j0. For n = 1 the third entry (node 2, not a grid node) gets 0. On the boundary
+    half-cells (nearest node 0 or n) the folded end functions 1 - u, u (u: distance to the
+    wall in cells), elsewhere the centred splines of the 3 nearest nodes."""
     t = (x - origin) / L
     jc = min(max(int(np.floor(t + 0.5)), 0), n)            # the nearest grid node
     j0 = min(max(jc - 1, 0), max(n - 2, 0))
     for q in range(NS):
         S[q] = 0.0
         dS[q] = 0.0
+    if jc == 0 or jc == n:
+        # boundary half-cell: the fold of the ghost spline, in closed form (exact: no
+        # cancellation of N_1 - N_-1 near the wall, so no weight of -1e-16)
+        u = t - jc if jc == 0 else jc - t                   # distance to the wall, in cells
+        u = min(max(u, 0.0), 1.0)      # a particle out of the grid by round-off: the wall's
+        sgn = 1.0 if jc == 0 else -1.0
+        inner = jc + 1 if jc == 0 else jc - 1
+        S[jc - j0] = 1.0 - u
+        dS[jc - j0] = -sgn / L
+        S[inner - j0] = u
+        dS[inner - j0] = sgn / L
+        return j0
     for j in range(jc - 1, jc + 2):
         s = t - j
         a = abs(s)
         if a <= 0.5:
-            w = 0.75 - s * s
-            g = -2.0 * s / L
+            S[j - j0] = 0.75 - s * s
+            dS[j - j0] = -2.0 * s / L
         elif a < 1.5:
             r = 1.5 - a
-            w = 0.5 * r * r
-            g = -r / L if s > 0.0 else r / L
-        else:
-            continue
-        if j < 0:                       # ghost node -1: u_-1 = 2 u_0 - u_1
-            _add(S, dS, 0 - j0, 2.0 * w, 2.0 * g)
-            _add(S, dS, 1 - j0, -w, -g)
-        elif j > n:                     # ghost node n + 1: u_n+1 = 2 u_n - u_n-1
-            _add(S, dS, n - j0, 2.0 * w, 2.0 * g)
-            _add(S, dS, n - 1 - j0, -w, -g)
-        else:
-            _add(S, dS, j - j0, w, g)
+            S[j - j0] = 0.5 * r * r
+            dS[j - j0] = -r / L if s > 0.0 else r / L
     return j0
 
 
