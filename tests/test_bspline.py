@@ -234,15 +234,18 @@ def test_refusals():
         fm.Simulation(tri, tp, fm.Explicit(), dt=1e-5, shape="bspline2")
 
 
-if __name__ == "__main__":          # the measurements quoted in the docstring (serial)
+if __name__ == "__main__":          # the measurements quoted here and in docs/guide/choosing.md (serial)
     import sys
     import time
     sys.path.insert(0, "tests")
+    from fenicsmpm.bench import mms, shape_cost
     from fenicsmpm.bench.column_peers import run_one
     from test_gimp import column_errors
     for shape in ("bspline2", "cpgimp", "mpm"):
         run_one((1, 4), shape, MPI.COMM_SELF, t_end=0.05)          # JIT warm-up, untimed
-        for cells in ((1, 20), (4, 40)):
+        for cells in ((1, 20), (4, 40), (10, 100)):
+            if cells == (10, 100) and shape == "mpm":
+                continue
             walls = []
             for _ in range(3):
                 rec, _ = run_one(cells, shape, MPI.COMM_SELF)
@@ -250,12 +253,15 @@ if __name__ == "__main__":          # the measurements quoted in the docstring (
             m = rec["metrics"]
             print(f"sudden column {cells[0]}x{cells[1]} {shape:9s} top_rms {100 * m['top_rms']:.2f} % "
                   f"mid_rms {100 * m['mid_rms']:.2f} % band_rms {100 * m['band_rms']:.2f} % "
-                  f"wall {min(walls):.3f} s (fastest of 3; {rec['config']['dt']:.3g} s steps)", flush=True)
-    from fenicsmpm.bench import mms
-    mms.run(series=[("Explicit", "MUSL", s, "quadrilateral") for s in ("bspline2", "cpgimp", "mpm")],
-            cells=(8, 16, 32), out="bench-results", comm=MPI.COMM_SELF)
+                  f"wall {min(walls):.3f} s (fastest of 3 {[round(w, 3) for w in walls]}; "
+                  f"dt {rec['config']['dt']:.3g} s)", flush=True)
     for shape in ("bspline2", "cpgimp"):
         t = time.perf_counter()
         a, b, c = column_errors(shape, comm=MPI.COMM_SELF)
         print(f"L1 soft column (ramped) {shape:9s} {100 * a:.2f} % of rho g H, {100 * b:.2f} % of "
               f"rho g d below 2h, settlement {c:.2f} cells ({time.perf_counter() - t:.1f} s)", flush=True)
+    mms.run(series=[("Explicit", "MUSL", s, "quadrilateral") for s in ("bspline2", "cpgimp", "mpm")],
+            cells=(8, 16, 32), out="bench-results", comm=MPI.COMM_SELF)
+    for n in (40, 80):
+        shape_cost.run(shapes=("mpm", "cpgimp", "bspline2"), n=n, steps=10, repeats=3,
+                       out="bench-results", comm=MPI.COMM_SELF)
