@@ -34,6 +34,9 @@ Simulation(shape="bspline2")).
   this file): at 32 cells the error of the particles 2 or more cells from the walls is 0.099
   of their exact stress (cpGIMP 0.013), and the total grows over the run (0.012, 0.043,
   0.071, 0.082 at each quarter of t_end): not a wall effect of the modified end splines.
+  With 4 x 4 particles per cell it converges: 0.047 / 0.017 at 16 / 32 cells (cpGIMP 0.058 /
+  0.015; `PYTHONPATH=. python tests/test_bspline.py ppc`): the particle quadrature of 2 x 2
+  points per cell is what stalls it.
 - Implicit: Newmark on the V1 vibrating bar (dt = 5 h / c, 3 periods) with bspline2, matrix
   pattern of 2 cell rings: period within 3 %; QuasiStatic on a block: no coupled pair outside
   the 2-ring pattern.
@@ -251,9 +254,27 @@ def test_refusals():
         fm.Simulation(tri, tp, fm.Explicit(), dt=1e-5, shape="bspline2")
 
 
+def mms_particles_per_cell():
+    """V3 MMS, explicit MUSL, 2 x 2 and 4 x 4 particles per cell at 16 and 32 cells, bspline2
+    and cpgimp (`PYTHONPATH=. python tests/test_bspline.py ppc`)."""
+    from fenicsmpm.problems.mms import axis_aligned, errors
+    for shape in ("bspline2", "cpgimp"):
+        for ppc in (2, 4):
+            for n in (16, 32):
+                sim, ex = axis_aligned(fm.Explicit("MUSL"), n_cells=n, per_cell=ppc, shape=shape,
+                                       comm=MPI.COMM_SELF)
+                sim.run(steps=ex.steps, progress=False)
+                err = errors(sim, ex)
+                print(f"MMS {shape:9s} {ppc}x{ppc} per cell, {n} cells: displacement "
+                      f"{err['displacement']:.4f}, stress {err['stress']:.4f}", flush=True)
+
+
 if __name__ == "__main__":          # the measurements quoted here and in docs/guide/choosing.md (serial)
     import sys
     import time
+    if sys.argv[1:] == ["ppc"]:
+        mms_particles_per_cell()
+        sys.exit(0)
     sys.path.insert(0, "tests")
     from fenicsmpm.bench import mms, shape_cost
     from fenicsmpm.bench.column_peers import run_one
