@@ -35,8 +35,8 @@ Simulation(shape="bspline2")).
   of their exact stress (cpGIMP 0.013), and the total grows over the run (0.012, 0.043,
   0.071, 0.082 at each quarter of t_end): not a wall effect of the modified end splines.
   With 4 x 4 particles per cell it converges: 0.047 / 0.017 at 16 / 32 cells (cpGIMP 0.058 /
-  0.015; `PYTHONPATH=. python tests/test_bspline.py ppc`): the particle quadrature of 2 x 2
-  points per cell is what stalls it.
+  0.015; `PYTHONPATH=. python tests/test_bspline.py ppc`), which points to the particle
+  quadrature of 2 x 2 points per cell as what stalls it.
 - Implicit: Newmark on the V1 vibrating bar (dt = 5 h / c, 3 periods) with bspline2, matrix
   pattern of 2 cell rings: period within 3 %; QuasiStatic on a block: no coupled pair outside
   the 2-ring pattern.

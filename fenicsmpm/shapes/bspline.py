@@ -26,16 +26,17 @@ and interpolating at the wall (N'_0 = 1, every other function 0 at x = 0), so a 
 node fixes the velocity on the wall. The span is the quadratic splines on the midpoint knots
 that are linear on the two boundary half-cells, one function per grid node (the lumped mass
 matrix and the boundary conditions of the Simulation apply unchanged); an axis of one cell
-(n = 1) gets the linear hats. This is the boundary treatment chosen here over the
-open-knot-vector basis (repeated end knots, Yamaguchi et al. 2021; de Vaucorbeil et al.
-2020), which on the same midpoint knots has n + 3 functions per axis, not one per grid
-node, and needs control points that are not grid nodes. Steffen et al. 2008 likewise modify
-the functions of the two nodes next to each boundary.
+(n = 1) gets the linear hats. This boundary treatment was chosen over the open-knot-vector
+basis (end knots repeated three times), which on the same midpoint knots has n + 3 functions
+per axis, not one per grid node: its coefficients are not grid-node values, so neither the
+nodal mass/momentum arrays nor the Simulation's fixed-node boundary conditions would apply
+unchanged. (Steffen, Kirby & Berzins 2008 also modify the splines next to the boundary; their
+exact end functions were not compared with these.)
 
 Measured (tests/test_bspline.py, docs/guide/choosing.md): as accurate as cpGIMP on the
 elastic columns under self-weight, but on the V3 manufactured solution its stress error
 stops converging with 2 x 2 particles per cell (0.084 at 32 cells against cpGIMP's 0.012;
-with 4 x 4 it converges, 0.017 against 0.015): the particle quadrature, not the basis;
+with 4 x 4 it converges, 0.017 against 0.015, which points to the particle quadrature);
 shape="auto" does not pick it.
 
 Particles are points (no domain): the weights depend on x_p only (no F, no particle field).
