@@ -58,7 +58,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     particle's cell), "ugimp"/"cpgimp" (shapes.gimp: structured quadrilateral/hexahedral
     grids), "cpdi1"/"cpdi2" (shapes.cpdi: any 2D or 3D P1/Q1 mesh), "gauss" (shapes.gauss_gimp:
     deformed-voxel GIMP by 2 x 2 Gauss points pushed forward by F, seed 002 §3.3.1; any 2D
-    P1/Q1 mesh). The wider families need, in parallel, the vertex ghost layer: a mesh
+    P1/Q1 mesh), "bspline2" (shapes.bspline: boundary-modified quadratic B-splines on the
+    structured grids of GIMP; never picked by "auto"). The wider families need, in parallel, the vertex ghost layer: a mesh
     without it (dolfinx's default partitioner) is rebuilt from the same cells with the same
     owners (Grid.ensure_vertex_ring; grid.mesh is then a new dolfinx mesh); implicit
     integrators then use a wider matrix pattern (integrators.linear_system.stencil_rings).

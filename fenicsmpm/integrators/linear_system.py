@@ -182,7 +182,8 @@ def stencil_rings(sim):
     cells are joined through that cell, so rings = 3 in general (2 on a structured quad
     lattice, where corners at most a cell apart lie in cells that share a vertex). Gauss-GIMP
     ("gauss"): its Gauss points lie inside the same pushed-forward voxel, so the CPDI bound
-    holds."""
+    holds. Quadratic B-splines ("bspline2"): a particle's nodes are the 3 nearest per axis, at
+    most 2 lattice steps apart: rings = 2."""
     shape = getattr(sim, "shape", "mpm")
     if shape == "mpm":
         return 1
@@ -197,6 +198,8 @@ def stencil_rings(sim):
             from mpi4py import MPI
             rmax = sim.comm.allreduce(rmax, op=MPI.MAX)
         return int(np.ceil(2.0 * rmax - 1e-9)) + 1 if rmax > 0 else 2
+    if shape == "bspline2":
+        return 2
     if shape in ("cpdi1", "cpdi2", "gauss"):
         g = sim.grid
         return 2 if g.structured and g.kind == kt_shape.TENSOR else 3

@@ -1,10 +1,12 @@
 """Shape-function families (the "shape" stage): standard (the Lagrange basis of the particle's
-cell, Simulation(shape="mpm")), gimp ("ugimp"/"cpgimp"), cpdi ("cpdi1"/"cpdi2"), gauss_gimp
-("gauss") and cmpm (the composite basis of the DM-GC integrators)."""
+cell, Simulation(shape="mpm")), gimp ("ugimp"/"cpgimp"), bspline ("bspline2": boundary-modified
+quadratic B-splines on the same structured lattices as GIMP; measured against cpGIMP in
+docs/guide/choosing.md, not picked by "auto"), cpdi ("cpdi1"/"cpdi2"), gauss_gimp ("gauss")
+and cmpm (the composite basis of the DM-GC integrators)."""
 
 import logging
 
-SHAPES = ("auto", "mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss")
+SHAPES = ("auto", "mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss", "bspline2")
 _log = logging.getLogger("fenicsmpm")
 
 
@@ -75,4 +77,7 @@ def wide_shape(sim, shape):
     if shape == "gauss":
         from .gauss_gimp import GaussGimpShape
         return GaussGimpShape(sim)
+    if shape == "bspline2":
+        from .bspline import BsplineShape
+        return BsplineShape(sim)
     return None

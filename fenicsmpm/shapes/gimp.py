@@ -65,10 +65,90 @@ def weight_1d(xp, lp, xi_node, L, lo, hi):
 
 
 @njit(cache=True)
+def _some_gradient(d, dSk, Sk, idx):
+    """Whether a tensor-product node of weight 0 has a nonzero gradient component."""
+    for k in range(d):
+        g = dSk[k, idx[k]]
+        for l in range(d):
+            if l != k:
+                g *= Sk[l, idx[l]]
+        if g != 0.0:
+            return True
+    return False
+
+
+@njit(cache=True)
+def tensor_product(d, ns, Sk, dSk, off, idx, table, p, keep_gradients,
+                   nodes_out, N_out, dN_out, count_out):
+    """Write particle p's tensor-product weights into row p of the outputs (shared by the
+    lattice families: gimp, bspline). Sk/dSk (d, ns): the 1D weights and their derivatives of
+    the ns lattice nodes looked at per axis; off (d, ns): their flat lattice offsets (-1:
+    outside the local lattice); idx (d,): scratch. A node of weight 0 is skipped (and kept
+    as padding), unless `keep_gradients` and one of its gradient factors is not 0 (a node
+    whose 1D weight vanishes at the particle with a nonzero slope, e.g. the boundary-modified
+    B-spline at the grid boundary). Nonzero-weight nodes first (count_out[p] of them, only
+    the first nodes_out.shape[1] written), then padding (a valid node with N = dN = 0).
+    Returns True when a node of nonzero weight is not a local node."""
+    nv = nodes_out.shape[1]
+    bad = False
+    cnt = 0
+    pad = -1
+    total = 1
+    for k in range(d):
+        total *= ns
+        idx[k] = 0
+    for m in range(total):
+        if m > 0:                       # next multi-index, axis 0 fastest (no divisions)
+            k = 0
+            idx[0] += 1
+            while idx[k] == ns:
+                idx[k] = 0
+                k += 1
+                idx[k] += 1
+        w = 1.0
+        flat = 0
+        node = -1
+        inside = True
+        for k in range(d):
+            w *= Sk[k, idx[k]]
+            o = off[k, idx[k]]
+            if o < 0:
+                inside = False
+            flat += o
+        if inside:
+            node = table[flat]
+        if w == 0.0 and not (keep_gradients and _some_gradient(d, dSk, Sk, idx)):
+            if node >= 0 and pad < 0:
+                pad = node
+            continue
+        if node < 0:
+            bad = True
+            continue
+        if cnt < nv:
+            nodes_out[p, cnt] = node
+            N_out[p, cnt] = w
+            for k in range(d):
+                g = dSk[k, idx[k]]
+                for l in range(d):
+                    if l != k:
+                        g *= Sk[l, idx[l]]
+                dN_out[p, cnt, k] = g
+        cnt += 1
+    count_out[p] = cnt
+    if pad < 0 and cnt > 0:
+        pad = nodes_out[p, 0]
+    for a in range(cnt, nv):
+        nodes_out[p, a] = pad
+        N_out[p, a] = 0.0
+        for k in range(d):
+            dN_out[p, a, k] = 0.0
+    return bad
+
+
+@njit(cache=True)
 def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, ns, p0, p1,
           nodes_out, N_out, dN_out, count_out):
     d = len(D)
-    nv = nodes_out.shape[1]
     Sk = np.empty((d, ns))
     dSk = np.empty((d, ns))
     off = np.empty((d, ns), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
@@ -88,57 +168,9 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
                 Sk[k, q] = S
                 dSk[k, q] = dS
             stride *= nlat[k]
-        cnt = 0
-        pad = -1
-        total = 1
-        for k in range(d):
-            total *= ns
-            idx[k] = 0
-        for m in range(total):
-            if m > 0:                       # next multi-index, axis 0 fastest (no divisions)
-                k = 0
-                idx[0] += 1
-                while idx[k] == ns:
-                    idx[k] = 0
-                    k += 1
-                    idx[k] += 1
-            w = 1.0
-            flat = 0
-            node = -1
-            inside = True
-            for k in range(d):
-                w *= Sk[k, idx[k]]
-                o = off[k, idx[k]]
-                if o < 0:
-                    inside = False
-                flat += o
-            if inside:
-                node = table[flat]
-            if w == 0.0:
-                if node >= 0 and pad < 0:
-                    pad = node
-                continue
-            if node < 0:
-                bad = p
-                continue
-            if cnt < nv:
-                nodes_out[p, cnt] = node
-                N_out[p, cnt] = w
-                for k in range(d):
-                    g = dSk[k, idx[k]]
-                    for l in range(d):
-                        if l != k:
-                            g *= Sk[l, idx[l]]
-                    dN_out[p, cnt, k] = g
-            cnt += 1
-        count_out[p] = cnt
-        if pad < 0 and cnt > 0:
-            pad = nodes_out[p, 0]
-        for a in range(cnt, nv):
-            nodes_out[p, a] = pad
-            N_out[p, a] = 0.0
-            for k in range(d):
-                dN_out[p, a, k] = 0.0
+        if tensor_product(d, ns, Sk, dSk, off, idx, table, p, False,
+                          nodes_out, N_out, dN_out, count_out):
+            bad = p
     return bad
 
 
@@ -183,9 +215,10 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
     return bad.max()
 
 
-def lattice(grid):
+def lattice(grid, name="GIMP"):
     """Global lattice data of a structured quadrilateral/hexahedral grid for gimp_shape:
-    dict(origin, spacing, lo, hi, ilo, nlat, table). Collective (MPI reductions).
+    dict(origin, spacing, lo, hi, ilo, nlat, table). Collective (MPI reductions). `name`: the
+    family named in the error message.
 
     Raises ValueError if the grid is not a lattice of equal axis-aligned boxes, one cell each."""
     from mpi4py import MPI
@@ -200,7 +233,7 @@ def lattice(grid):
             all_sp = comm.allgather(spacing)
             ok = all(np.allclose(sp, spacing, rtol=1e-9, atol=0.0) for sp in all_sp)
     if not ok:
-        raise ValueError("GIMP shape functions need a structured grid of equal axis-aligned "
+        raise ValueError(f"{name} shape functions need a structured grid of equal axis-aligned "
                          "quadrilaterals/hexahedra (dolfinx create_rectangle/create_box with "
                          "CellType.quadrilateral/hexahedron)")
     lo = grid.node_x.min(axis=0)
@@ -228,11 +261,58 @@ def initial_half_widths(grid, particles, lat):
     return np.ascontiguousarray(0.5 * s[:, None] * L[None, :])
 
 
-class GimpShape:
+class LatticeShape:
+    """Shared driver of the lattice families (GimpShape, bspline.BsplineShape): the output
+    buffers, kept between steps with the last step's node columns, and the wider evaluation
+    when a particle touches more nodes than that. Subclasses set `name` and define
+    _window(sim) -> ns (lattice nodes looked at per axis) and
+    _kernel(sim, ns, nodes, N, dN, count) -> -1 or the index of a particle reaching a node
+    that is not local."""
+    name = "lattice"
+
+    def _init_buffers(self):
+        self._buf = None
+        self._nv = 0            # the node columns of the last evaluation (0: none yet)
+
+    def before_locate(self, sim):
+        """Nothing to move: the weights follow x_p (and F for cpGIMP)."""
+
+    def evaluate(self, sim):
+        """(nodes, N, dN) of the local particles, nv = the largest number of nodes a particle
+        touches (padded)."""
+        p, d = sim.particles, sim.gdim
+        n = len(p)
+        ns = self._window(sim)
+        width = ns ** d
+        # columns: the last step's node count (usually still right: no copy), at most width
+        cap = min(self._nv, width) if self._nv else width
+        for _ in range(2):
+            if self._buf is None or self._buf[0].shape != (n, cap):
+                self._buf = (np.empty((n, cap), dtype=np.int32), np.empty((n, cap)),
+                             np.empty((n, cap, d)), np.empty(n, dtype=np.int64))
+            nodes, N, dN, count = self._buf
+            bad = self._kernel(sim, ns, nodes, N, dN, count)
+            nv = max(int(count.max()) if n else 1, 1)
+            if nv <= cap:
+                break
+            cap = width                  # a particle touches more nodes than last step
+        if bad >= 0:
+            raise RuntimeError(f"{self.name}: the domain of particle {int(p.id[bad])} at "
+                               f"{np.round(p.x[bad], 6).tolist()} reaches grid nodes that are "
+                               f"not on this rank; " + _RING_MESSAGE.format(name=self.name))
+        self._nv = nv
+        if nv == cap:
+            return nodes, N, dN
+        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
+                np.ascontiguousarray(dN[:, :nv]))
+
+
+class GimpShape(LatticeShape):
     """uGIMP (contiguous=False) or cpGIMP (contiguous=True) shape functions for a Simulation.
 
     Adds the particle field `gimp_l0` (n, gdim), the initial half-widths (initial_half_widths,
     unless the particles already carry it). Collective at construction."""
+    name = "GIMP"
 
     def __init__(self, sim, contiguous):
         grid, p = sim.grid, sim.particles
@@ -242,43 +322,19 @@ class GimpShape:
         self.contiguous = bool(contiguous)
         if not hasattr(p, "gimp_l0"):
             p.add_field("gimp_l0", (grid.gdim,))[:] = initial_half_widths(grid, p, self.lat)
-        self._buf = None
-        self._nv = 0            # the node columns of the last evaluation (0: none yet)
+        self._init_buffers()
 
-    def before_locate(self, sim):
-        """Nothing to move: the box follows x_p (and F for cpGIMP)."""
+    def _window(self, sim):
+        p = sim.particles
+        ratio = (max_half_width(p.gimp_l0, p.F, self.lat["spacing"], self.contiguous)
+                 if len(p) else 0.5)
+        return int(np.ceil(2.0 * ratio)) + 2
 
-    def evaluate(self, sim):
-        """(nodes, N, dN) of the local particles, nv = the largest number of nodes a particle
-        touches (padded)."""
-        p, lat, d = sim.particles, self.lat, sim.gdim
-        n = len(p)
-        ratio = max_half_width(p.gimp_l0, p.F, lat["spacing"], self.contiguous) if n else 0.5
-        ns = int(np.ceil(2.0 * ratio)) + 2
-        width = ns ** d
-        # columns: the last step's node count (usually still right: no copy), at most width
-        cap = min(self._nv, width) if self._nv else width
-        for _ in range(2):
-            if self._buf is None or self._buf[0].shape != (n, cap):
-                self._buf = (np.empty((n, cap), dtype=np.int32), np.empty((n, cap)),
-                             np.empty((n, cap, d)), np.empty(n, dtype=np.int64))
-            nodes, N, dN, count = self._buf
-            bad = gimp_shape(sim.grid.D, p.x, p.gimp_l0, p.F, self.contiguous, lat["origin"],
-                             lat["spacing"], lat["lo"], lat["hi"], lat["ilo"], lat["nlat"],
-                             lat["table"], ns, nodes, N, dN, count)
-            nv = max(int(count.max()) if n else 1, 1)
-            if nv <= cap:
-                break
-            cap = width                  # a particle touches more nodes than last step
-        if bad >= 0:
-            raise RuntimeError(f"GIMP: the domain of particle {int(p.id[bad])} at "
-                               f"{np.round(p.x[bad], 6).tolist()} reaches grid nodes that are "
-                               f"not on this rank; " + _RING_MESSAGE.format(name="GIMP"))
-        self._nv = nv
-        if nv == cap:
-            return nodes, N, dN
-        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
-                np.ascontiguousarray(dN[:, :nv]))
+    def _kernel(self, sim, ns, nodes, N, dN, count):
+        p, lat = sim.particles, self.lat
+        return gimp_shape(sim.grid.D, p.x, p.gimp_l0, p.F, self.contiguous, lat["origin"],
+                          lat["spacing"], lat["lo"], lat["hi"], lat["ilo"], lat["nlat"],
+                          lat["table"], ns, nodes, N, dN, count)
 
 
 _RING_MESSAGE = ("{name} shape functions span neighbouring cells, whose nodes must be local: "
