@@ -14,6 +14,14 @@ _WORKER = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
 if _WORKER != "gw0":
     os.environ["NUMBA_CACHE_DIR"] = os.path.join(os.path.dirname(os.path.dirname(
         os.path.abspath(__file__))), f".numba-cache-{_WORKER}")
+# An xdist worker inherits the variables of the controller's singleton MPI start (PMIX_*,
+# OMPI_MCA_ess, ...): drop them before mpi4py starts MPI here, so the worker is a clean
+# singleton and an mpirun a test launches does not take them for an enclosing launch.
+if "PYTEST_XDIST_WORKER" in os.environ:
+    for _k in list(os.environ):
+        if (_k.startswith(("PMIX_", "ORTE_")) or _k.startswith("OMPI_") and not _k.startswith("OMPI_MCA_")
+                or _k.startswith(("OMPI_MCA_orte_", "OMPI_MCA_ess", "OMPI_MCA_pmix"))):
+            del os.environ[_k]
 
 import numpy as np  # noqa: E402
 import pytest
