@@ -9,14 +9,8 @@ increment is kept; one volume change per cell instead of one constraint per part
 import numpy as np
 from numba import njit
 
+from ..materials.piola import det3, inv3
 from .transfer import add_block
-
-
-@njit(cache=True)
-def _det3(a):
-    return (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
-            - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
-            + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
 
 
 @njit(cache=True)
@@ -29,32 +23,16 @@ def fbar(cell, V, dF, n_cells, n):
     for p in range(len(cell)):
         c = cell[p]
         sv[c] += V[p]
-        sj[c] += V[p] * _det3(dF[p])
+        sj[c] += V[p] * det3(dF[p])
     for p in range(len(cell)):
         c = cell[p]
-        J = _det3(dF[p])
+        J = det3(dF[p])
         Jb = sj[c] / sv[c]
         if J > 0.0 and Jb > 0.0:
             s = (Jb / J) ** (1.0 / n)
             for i in range(n):
                 for j in range(n):
                     dF[p, i, j] *= s
-
-
-@njit(cache=True)
-def _inv_det(a, out):
-    """out = inverse of the 3 x 3 matrix a; returns det a."""
-    det = _det3(a)
-    out[0, 0] = (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1]) / det
-    out[0, 1] = (a[0, 2] * a[2, 1] - a[0, 1] * a[2, 2]) / det
-    out[0, 2] = (a[0, 1] * a[1, 2] - a[0, 2] * a[1, 1]) / det
-    out[1, 0] = (a[1, 2] * a[2, 0] - a[1, 0] * a[2, 2]) / det
-    out[1, 1] = (a[0, 0] * a[2, 2] - a[0, 2] * a[2, 0]) / det
-    out[1, 2] = (a[0, 2] * a[1, 0] - a[0, 0] * a[1, 2]) / det
-    out[2, 0] = (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]) / det
-    out[2, 1] = (a[0, 1] * a[2, 0] - a[0, 0] * a[2, 1]) / det
-    out[2, 2] = (a[0, 0] * a[1, 1] - a[0, 1] * a[1, 0]) / det
-    return det
 
 
 @njit(cache=True)
@@ -80,7 +58,7 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, con
     J = np.empty(nodes.shape[0])
     for q in range(nodes.shape[0]):
         c = cell[q]
-        J[q] = _inv_det(dF0[q], inv)
+        J[q] = inv3(dF0[q], inv)
         w = V[q] * J[q]
         sv[c] += V[q]
         sj[c] += w
@@ -97,7 +75,7 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, con
         c = cell[p]
         avg = J[p] > 0.0 and sj[c] > 0.0             # as fbar(): no averaging otherwise
         s = (sj[c] / sv[c] / J[p]) ** (1.0 / n) if avg else 1.0
-        _inv_det(dF0[p], inv)
+        inv3(dF0[p], inv)
         for a in range(nv):
             for k in range(d):
                 h = 0.0
