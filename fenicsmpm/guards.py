@@ -116,6 +116,37 @@ def check_particles(sim, vol_tol=1e-6):
     raise (FloatingPointError if code <= 4 else RuntimeError)(msg)
 
 
+def check_wave_speed(sim):
+    """Warn once (rank 0) when a material whose stiffness grows with its state (a
+    `state_p_wave_speed(stress)` method, e.g. Hypoplastic above p_max) now has a P-wave speed
+    for which the explicit dt exceeds the critical step stability_factor h / c_p: dt="auto"
+    was set from the initial bound and does not follow the state. Collective."""
+    if not sim.integrator.explicit or getattr(sim, "_wave_warned", False):
+        return
+    p = sim.particles
+    worst = (0.0, None)
+    for k, mat in enumerate(p.materials):
+        f = getattr(mat, "state_p_wave_speed", None)
+        if f is not None:
+            c = f(p.stress[p.material_id == k])
+            worst = max(worst, (c, k), key=lambda r: r[0])
+    if sim.comm.size > 1:
+        worst = max(sim.comm.allgather(worst), key=lambda r: r[0])
+    c, k = worst
+    if k is None:
+        return
+    crit = getattr(sim.integrator, "stability_factor", 1.0) * sim.grid.h / c
+    if sim.dt > crit:
+        sim._wave_warned = True
+        if sim.comm.rank == 0:
+            mat = p.materials[k]
+            warnings.warn(f"step {sim.step_count}, t = {sim.t:.6g}: {type(mat).__name__} "
+                          f"(material {k}) now has c_p = {c:.4g} m/s, so dt = {sim.dt:.4g} s "
+                          f"exceeds the critical step {crit:.4g} s (dt was set from c_p = "
+                          f"{mat.p_wave_speed:.4g} m/s); raise the material's p_max or lower "
+                          f"dt / cfl", RuntimeWarning, stacklevel=4)
+
+
 def particles_left(sim, ids, xs):
     """Apply sim.on_leave (Simulation) to the particles in no cell of the mesh (cell == -1; `ids`
     and `xs` list them globally, the same on every rank)."""

@@ -15,7 +15,7 @@ from .boundaries import TractionForms
 from .boundaries import particle_layer as kl
 from .checkpoint import CheckpointMixin
 from .energy import EnergyMixin
-from .guards import ParticlesLeftMesh, check_particles, particles_left
+from .guards import ParticlesLeftMesh, check_particles, check_wave_speed, particles_left
 from .io import Progress
 from .kernels import axisymmetric as axi
 from .kernels import transfer as kt
@@ -29,6 +29,7 @@ from .shapes import choose_shape, resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
 MANY_STEPS = 1_000_000         # dt="auto" runs longer than this many steps are warned about
+WAVE_CHECK_EVERY = 100         # steps between guards.check_wave_speed checks
 
 
 class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
@@ -484,6 +485,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.step_count += 1
         t0 = time.perf_counter()
         check_particles(self)
+        if self.step_count % WAVE_CHECK_EVERY == 0:
+            check_wave_speed(self)
         self.timers["guards"] += time.perf_counter() - t0
         if self.splitting is not None:
             self.stats["split"] = self.splitting.apply(self)
@@ -495,8 +498,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
 
     def _check_run(self, steps):
         """Before a run: warn when dt="auto" gives more than MANY_STEPS steps (naming the
-        material that limits dt), and refuse an explicit run whose particles would cross more
-        than a cell in one step (max |v| dt > h)."""
+        material that limits dt), warn when a material's state has outgrown the wave speed dt
+        came from (guards.check_wave_speed), and refuse an explicit run whose particles would
+        cross more than a cell in one step (max |v| dt > h)."""
         mats = self.particles.materials
         if getattr(self, "_dt_auto", False) and steps > MANY_STEPS and self.comm.rank == 0:
             m = max(mats, key=lambda q: q.p_wave_speed)
@@ -507,6 +511,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                           RuntimeWarning, stacklevel=3)
         if not self.integrator.explicit:
             return
+        check_wave_speed(self)
         v = self.particles.v
         vmax = float(np.sqrt(np.max(np.einsum("pi,pi->p", v, v)))) if len(v) else 0.0
         if self.comm.size > 1:

@@ -205,12 +205,12 @@ def test_stress_free_and_tension_states_have_no_nan():
     assert np.isclose(st[1, 0], 1.65 * np.exp(-20 * 3e-3) - 1.0, rtol=1e-12)
 
 
-def _column(comm, partitioner=None, ramp=0.5, geo=False, integrator=None, tol=1e-4):
+def _column(comm, partitioner=None, ramp=0.5, geo=False, integrator=None, tol=1e-4, p_max=60e3):
     """A 2 m hypoplastic sand column (0.5 m wide, h = 0.25, rho = 2000, g = 10), rollers on
     the sides and the base; explicit MUSL with dt = "auto" (p_max = 60 kPa) unless an
     (implicit) integrator is given, then dt = 1."""
     H, h, g = 2.0, 0.25, 10.0
-    m = sand(density=2000.0, p_max=60e3, tol=tol)
+    m = sand(density=2000.0, p_max=p_max, tol=tol)
     kw = {} if partitioner is None else dict(partitioner=partitioner)
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [2 * h, H + h]], [2, 9],
                                  dmesh.CellType.quadrilateral, **kw)
@@ -226,6 +226,28 @@ def _column(comm, partitioner=None, ramp=0.5, geo=False, integrator=None, tol=1e
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 2 * h), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0), [1])
     return sim, m
+
+
+@pytest.mark.parametrize("p_max", [1e3, 60e3])
+def test_dt_auto_warns_when_the_state_outgrows_p_max(comm, p_max):
+    """dt="auto" comes from the P-wave speed at p_max. The geostatic column's largest mean
+    stress is 25.8 kPa: with p_max = 1 kPa (c_p 145 m/s there, 342 m/s at 25.8 kPa, so
+    dt = 0.5 h / 145 m/s is above h / 342 m/s) the run warns at its start that dt exceeds the
+    critical step (guards.check_wave_speed, naming the material and p_max); with p_max = 60 kPa
+    it does not."""
+    import warnings
+    sim, m = _column(comm, geo=True, p_max=p_max)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        sim.run(steps=1)
+    hit = [w for w in rec if "exceeds the critical step" in str(w.message)]
+    if comm.rank == 0:
+        assert len(hit) == (1 if p_max < 10e3 else 0), [str(w.message) for w in rec]
+        if hit:
+            assert "Hypoplastic (material 0)" in str(hit[0].message)
+            assert "p_max" in str(hit[0].message)
+    else:
+        assert not hit
 
 
 def test_column_settles_to_geostatic_stress(comm):

@@ -585,6 +585,15 @@ class Hypoplastic:
         (by ~1.6 at sigma_1/sigma_3 = 3); the explicit cfl < 1 is the margin for that."""
         return float(math.sqrt(self.constrained_modulus(self.params["p_max"]) / self._density))
 
+    def state_p_wave_speed(self, stress):
+        """The same bound at the largest mean effective stress p = -tr(sigma)/3 of `stress`
+        (n, 3, 3) when it exceeds p_max (the state outgrew the p_wave_speed that dt="auto" used;
+        guards.check_wave_speed warns), else p_wave_speed."""
+        p = float(-np.trace(stress, axis1=1, axis2=2).min() / 3.0) if len(stress) else 0.0
+        if p <= self.params["p_max"]:
+            return self.p_wave_speed
+        return float(math.sqrt(self.constrained_modulus(p) / self._density))
+
     def tensors(self, stress, e):
         """(L, N) of eqs 3.5-3.6 at stresses (n, 3, 3) and void ratios (n,)."""
         s = np.ascontiguousarray(np.reshape(stress, (-1, 3, 3)), dtype=np.float64)
