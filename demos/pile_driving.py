@@ -13,8 +13,9 @@ chi 1, p_t 1.6 kPa), rho 2600 kg/m^3, e_0 = 0.65; an elastic pile 5 m long, radi
 with a hemispherical (rounded) tip standing on the surface (E 100 MPa, nu 0.28, rho 2500);
 g = 10; pile-soil Coulomb friction mu = 0.2 by multi-velocity contact (fm.ExplicitContact,
 seed eqs 2.34-2.39; default: the plain detection of the seed, gap=None; --gap 0 the library's
-gap check). The seed's penalty algorithm (eqs 2.40-2.53) is not available: fm.ExplicitContact's
-penalty contact does not support axisymmetric grids. Bottom fixed, outer side r = 5 m on
+gap check). The seed's penalty algorithm (eqs 2.40-2.53, fm.ExplicitContact(algorithm=
+"penalty"), now also on axisymmetric grids) is not used here: its polylines would have to
+follow the soil surface around the tip. Bottom fixed, outer side r = 5 m on
 rollers, the axis fixed radially by the grid. Stage 1: gravity ramped over 2 s (seed 002 eq
 4.13, Simulation(gravity_ramp=4): g reaches its value at T/2), or with --start geostatic the
 K0 state (1 - sin phi_c) and e_0 (fenicsmpm.materials.hypoplastic.geostatic) with gravity on

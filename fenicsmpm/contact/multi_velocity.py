@@ -89,8 +89,9 @@ pairs and largest penetration.
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
 boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
 and their force is shared among the bodies at a node by mass, like the external force.
-Axisymmetric grids get the hoop terms of fenicsmpm.kernels.axisymmetric per body (multi-velocity
-only). Particle-layer boundaries are not supported by this integrator."""
+Axisymmetric grids get the hoop terms of fenicsmpm.kernels.axisymmetric per body (both
+algorithms; penalty forces per radian, contact.penalty). Particle-layer boundaries are not
+supported by this integrator."""
 import time
 
 import numpy as np
@@ -581,9 +582,6 @@ class ExplicitContact:
         if self.algorithm == "penalty":
             if sim.gdim != 2:
                 raise NotImplementedError("ExplicitContact: penalty contact is 2D only")
-            if getattr(sim.grid, "axisymmetric", False):
-                raise NotImplementedError("ExplicitContact: penalty contact does not support "
-                                          "axisymmetric simulations")
         self.nb = None
         self._penalty = None
 

@@ -89,8 +89,12 @@ against a (reduced) surface mass m ~ rho h^2 / 4 per unit thickness, so
 k_n = (K + 4G/3)/h of the stiffer body makes this the elastic wave limit h / c_p. A step
 above it is warned about (RuntimeWarning).
 
-Not yet: 3D (surfaces), axisymmetric grids, and the polyline state (positions, tangential
-forces) is not written to checkpoints."""
+Axisymmetric grids (x = (r, z)): nodal forces are per radian, so each vertex stands for the
+ring of area l_s r_s per radian: l_s is replaced by l_s r_s in every force above (normal,
+tangential, dashpot, preload); a vertex on the axis carries none.
+
+Not yet: 3D (surfaces), and the polyline state (positions, tangential forces) is not written
+to checkpoints."""
 import math
 import warnings
 
@@ -494,6 +498,8 @@ class PenaltyContact:
             ltrib = np.zeros(len(self.x))
             vn = np.zeros_like(self.x)
             lmax = tributary(self.x, self.seg, ltrib, vn)
+            if grid.axisymmetric:                     # per radian: the ring's area l_s r_s
+                ltrib *= np.abs(self.x[:, 0])
             depth = grid.h
             w = depth + 0.5 * lmax
             lo = self.x.min(axis=0) - w
