@@ -76,6 +76,9 @@ def write(sim, path, keep=1):
                 materials=[type(m).__name__ for m in p.materials],
                 optional=list(p.optional), n_probes=len(sim.probes),
                 split_count=0 if sim.splitting is None else sim.splitting.count)
+    shared = getattr(sim.integrator, "checkpoint_state", lambda: {})()
+    if shared and comm.rank == 0:               # replicated on every rank: written once
+        _write_atomic(os.path.join(folder, "integrator.npz"), lambda f: np.savez(f, **shared))
     if comm.size > 1:
         comm.barrier()                         # every rank file is complete
     if comm.rank == 0:
@@ -183,6 +186,10 @@ def read(sim, path):
     restore = getattr(sim.integrator, "restore_arrays", None)
     if restore is not None:
         restore(sim)
+    shared = os.path.join(folder, "integrator.npz")
+    if hasattr(sim.integrator, "restore_state") and os.path.isfile(shared):
+        with np.load(shared) as f:
+            sim.integrator.restore_state({k: f[k] for k in f.files})
     sim._n_alloc = -1                          # per-particle work arrays are re-sized
     return sim
 

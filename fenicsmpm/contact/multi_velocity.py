@@ -585,6 +585,30 @@ class ExplicitContact:
         self.nb = None
         self._penalty = None
 
+    def checkpoint_state(self):
+        """Replicated arrays a checkpoint keeps (fenicsmpm.checkpoint): the penalty polylines'
+        vertex positions, last displacements and tangential forces; {} otherwise."""
+        pc = self._penalty
+        if pc is None:
+            return {}
+        return dict(penalty_x=pc.x, penalty_du=pc.du, penalty_ft=pc.ft,
+                    penalty_preloaded=np.array([pc._preloaded]))
+
+    def restore_state(self, state):
+        """Take back checkpoint_state (now, or when the polylines are next built)."""
+        self._restored = dict(state)
+        if self._penalty is not None:
+            self._apply_restored(self._penalty)
+
+    def _apply_restored(self, pc):
+        st, self._restored = getattr(self, "_restored", None), None
+        if st:
+            if st["penalty_x"].shape != pc.x.shape:
+                raise ValueError(f"restore: the checkpoint's penalty polylines have "
+                                 f"{len(st['penalty_x'])} vertices, this integrator's {len(pc.x)}")
+            pc.x, pc.du, pc.ft = (np.array(st[k]) for k in ("penalty_x", "penalty_du", "penalty_ft"))
+            pc._preloaded = bool(st["penalty_preloaded"][0])
+
     def _penalty_state(self, sim):
         """The PenaltyContact of the polylines, built at the first step after a change."""
         if self._penalty is None:
@@ -597,6 +621,7 @@ class ExplicitContact:
                 raise ValueError(f"ExplicitContact(penalty): polyline of body {max(have)} but the "
                                  f"bodies are 0..{self.nb - 1}")
             self._penalty = PenaltyContact(self.k_n, self.k_t, self.polylines, self.damping)
+            self._apply_restored(self._penalty)
         return self._penalty
 
     # ------------------------------------------------------------------ helpers

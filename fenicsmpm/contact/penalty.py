@@ -93,8 +93,8 @@ Axisymmetric grids (x = (r, z)): nodal forces are per radian, so each vertex sta
 ring of area l_s r_s per radian: l_s is replaced by l_s r_s in every force above (normal,
 tangential, dashpot, preload); a vertex on the axis carries none.
 
-Not yet: 3D (surfaces), and the polyline state (positions, tangential forces) is not written
-to checkpoints."""
+Checkpoints keep the polyline state (positions, last displacements, tangential forces:
+ExplicitContact.checkpoint_state). Not yet: 3D (surfaces)."""
 import math
 import warnings
 
