@@ -10,7 +10,7 @@ import numpy as np
 from numba import njit
 
 from ..materials.piola import det3, inv3
-from .transfer import add_block
+from .transfer import add_block, stiffness_entry
 
 
 @njit(cache=True)
@@ -98,10 +98,7 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, con
                     for Jx in range(d):
                         qa += dN[p, a, Jx] * Q[r, Jx]
                     for cc in range(d):
-                        v = 0.0
-                        for Jx in range(d):
-                            for L in range(d):
-                                v += dN[p, a, Jx] * A[p, r, Jx, cc, L] * dN[p, b, L]
+                        v = stiffness_entry(dN, A, p, a, b, r, cc, d)
                         if avg:
                             v += qa * (Hb[c, b, cc] / sj[c] - hp[b, cc])
                         block[r, cc] = V[p] * s * v

@@ -547,6 +547,17 @@ def add_block(data, base, deg, i, j, d, constrained, block):
 
 
 @njit(cache=True)
+def stiffness_entry(dN, A, p, a, b, r, c, d):
+    """sum_J,L grad N_ap,J A_p[r, J, c, L] grad N_bp,L: entry (r, c) of particle p's block
+    for the node pair (a, b) before the volume factor."""
+    s = 0.0
+    for J in range(d):
+        for L in range(d):
+            s += dN[p, a, J] * A[p, r, J, c, L] * dN[p, b, L]
+    return s
+
+
+@njit(cache=True)
 def assemble_stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, data):
     """data += sum_p V_p grad N_ia,J A_p[r, J, c, L] grad N_jb,L (particle quadrature of the
     updated-Lagrangian tangent), skipping constrained rows and columns."""
@@ -559,9 +570,5 @@ def assemble_stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, data):
             for b in range(nodes.shape[1]):
                 for r in range(d):
                     for c in range(d):
-                        s = 0.0
-                        for J in range(d):
-                            for L in range(d):
-                                s += dN[p, a, J] * A[p, r, J, c, L] * dN[p, b, L]
-                        block[r, c] = V[p] * s
+                        block[r, c] = V[p] * stiffness_entry(dN, A, p, a, b, r, c, d)
                 add_block(data, plan[p, a, b], deg, i, nodes[p, b], d, constrained, block)
