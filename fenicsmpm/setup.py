@@ -2,6 +2,7 @@
 conditions, tractions and particle loads, Robin and particle-layer boundaries, frictional
 boundaries, periodic sides, particle splitting, stages, observers and probes. These methods
 register what the stages of the time loop (simulation.py) then apply."""
+import logging
 import math
 
 import numpy as np
@@ -197,6 +198,11 @@ class SetupMixin:
                                           "implemented on axisymmetric grids; use a mesh boundary")
             self._use_standard_shape("particle-layer boundaries absorb best with the standard "
                                      "family (W3 reflection 8 % with cpGIMP)")
+            if self.fbar and not self.integrator.explicit:
+                if not self.fbar_auto or self.step_count:
+                    raise NotImplementedError("add_boundary: implicit F-bar (fbar=True) does not "
+                                              "support particle layers; use fbar=False")
+                self.fbar, self.fbar_reason = False, "implicit F-bar does not support particle layers"
             boundary.attach(self.particles)
             self.layers.append(boundary)
             self._layer_version = None
@@ -281,7 +287,6 @@ class SetupMixin:
         nothing otherwise (a family asked for by name, or a run under way)."""
         if self.shape == "mpm" or not self.shape_auto or self.step_count:
             return
-        import logging
         self.shape, self.shape_reason, self._wide = "mpm", reason, None
         self._n_alloc = -1
         if self.comm.rank == 0:
@@ -314,9 +319,36 @@ class SetupMixin:
                                       f"force_integration={force_integration!r}")
         if shape not in SHAPES:
             raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
-        if fbar not in (True, False):
-            raise ValueError(f"Simulation: 'fbar' must be True or False, got {fbar!r}")
-        if fbar and getattr(self.integrator, "double_mapping", False):
+        if isinstance(fbar, str) and fbar != "auto" or fbar not in (True, False, "auto"):
+            raise ValueError(f"Simulation: 'fbar' must be True, False or 'auto', got {fbar!r}")
+        if fbar is True and getattr(self.integrator, "double_mapping", False):
             raise NotImplementedError("Simulation: fbar=True is not implemented for the "
                                       "double-mapping (DM-GC) integrators")
-        self.fbar = bool(fbar)
+        self.fbar_auto = fbar == "auto"
+        self.fbar, self.fbar_reason = (False, "") if self.fbar_auto else (bool(fbar), "")
+
+    def _resolve_fbar(self):
+        """fbar="auto" (issue 21, chosen by data): F-bar on where a deformable particle is
+        VonMises (isochoric plastic flow locks: Prandtl's smooth footing, bench bearing-capacity,
+        1.80 (2+pi) c_u without F-bar at 5 cells under B/2, 0.994 standard / 1.031 cpGIMP with
+        it; the implicit W5 footing at peak strength 1.249 -> 0.929) and the integrator supports
+        it; off otherwise: with Mohr-Coulomb the granular collapse against Lube et al.'s law
+        (problems.granular_collapse, h = min(L0, H0) / 16) ran out +10.9 / +25.3 / +23.2 % at
+        a = 1 / 2 / 4 with F-bar against +2.5 / +17.8 / +15.7 % without, its heights -22 / -30 /
+        -43 % against -8 / -16 / -34 %. Logged once (rank 0)."""
+        if not self.fbar_auto:
+            return
+        from .materials import VonMises
+        if not any(isinstance(m, VonMises) for m in self._wave_materials):
+            on, why = False, "no von Mises material"
+        elif getattr(self.integrator, "double_mapping", False):
+            on, why = False, "not implemented for the DM-GC integrators"
+        elif self.force_integration != "particles":
+            on, why = False, f"force_integration={self.force_integration!r}"
+        elif not self.integrator.explicit and (self.shape != "mpm" or self.axisymmetric):
+            on, why = False, "implicit F-bar needs the standard family on a plane or 3D grid"
+        else:
+            on, why = True, "von Mises material: isochoric plastic flow locks without it"
+        self.fbar, self.fbar_reason = on, why
+        if on and self.comm.rank == 0:
+            logging.getLogger("fenicsmpm").info("fbar='auto': %s (%s)", on, why)

@@ -70,13 +70,16 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     (kernels.fbar, F-bar) against volumetric locking under isochoric plastic flow (the Prandtl
     footing's limit pressure, problems.footing); explicit integrators, and implicit ones with
     the standard shape family on plane or 3D grids (F-bar's consistent, unsymmetric tangent,
-    kernels.fbar.fbar_stiffness); not the DM-GC integrators.
+    kernels.fbar.fbar_stiffness); not the DM-GC integrators. "auto" (default): on where a
+    deformable particle is VonMises and the integrator supports it, off otherwise (chosen by
+    data, setup.SetupMixin._resolve_fbar); the choice and its reason are `fbar` and
+    `fbar_reason`.
     Axisymmetric analysis is a property of the grid (fm.Grid(mesh, axisymmetric=True),
     fenicsmpm.kernels.axisymmetric): hoop terms are added to the strain, force and tangent, and the
     radial displacement of nodes on the axis r = 0 is fixed."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-12, on_leave="error", max_dt_cuts=0, shape="auto", fbar=False,
+                 mass_tolerance=1e-12, on_leave="error", max_dt_cuts=0, shape="auto", fbar="auto",
                  stress_feedback=None, gravity_ramp=None, force_integration="particles"):
         self.grid = grid
         self.particles = particles
@@ -137,6 +140,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self._inverted = np.zeros(0, dtype=np.int8)  # flagged by commit, reported by the guards
         self.shape_auto = shape == "auto"
         self.shape, self.shape_reason = resolve_shape(self, shape)
+        self._resolve_fbar()
         if self.shape != "mpm" and grid.ensure_vertex_ring():   # wide families: vertex ghosts
             self._on_new_mesh()
         try:

@@ -5,9 +5,9 @@ VonMises nu = 0.49, c_u = 10 kPa, rigid footing B/2 = 0.5 m pushed at 2e-3 c_s t
 frictionless multi-velocity contact), coarse h = 0.25 m (2 cells under the half-width), the
 pressure averaged over every step of t = 0.5-0.8 s (the quick `bearing-capacity` bench
 case). Exact: (2 + pi) c_u.
-Measured q / (2 + pi) c_u at h = 0.25 m: 1.065 with F-bar, 2.23 without (locking: still
-rising), 1.165 with cpGIMP and F-bar. The h series is in docs/measured.md
-(`python -m fenicsmpm.bench bearing-capacity`).
+Measured q / (2 + pi) c_u at h = 0.25 m: the defaults (cpGIMP and F-bar for von Mises) 1.165;
+standard family 1.065 with F-bar, 2.23 without (locking: still rising). The h series is in
+docs/measured.md (`python -m fenicsmpm.bench bearing-capacity`).
 Also: F-bar leaves an isochoric increment alone and makes a cell's particles share one
 volume change; serial and under mpirun -n 2."""
 import numpy as np
@@ -30,9 +30,11 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
                           os.path.join(out, "bearing-capacity.png"))
     q = {r["name"]: r["metrics"]["plateau"] for r in doc["runs"]}
     print(f"\nq / (2 + pi) c_u at h = 0.25 m: {q}")
-    assert abs(q["h0.25-auto-fbar-on"] - 1.0) < 0.10, q
-    assert q["h0.25-auto-fbar-off"] > 1.8, q
-    assert abs(q["h0.25-cpgimp-fbar-on"] - 1.0) < 0.20, q
+    assert abs(q["h0.25-mpm-fbar-on"] - 1.0) < 0.10, q
+    assert q["h0.25-mpm-fbar-off"] > 1.8, q
+    assert abs(q["h0.25-default"] - 1.0) < 0.20, q
+    assert {r["name"]: (r["config"]["shape"], r["config"]["fbar"]) for r in doc["runs"]}[
+        "h0.25-default"] == ("cpgimp", True)
 
 
 def test_fbar_kernel_shares_the_volume_change():

@@ -16,7 +16,8 @@ def _sim(cell_type, integrator, ring=True, material=None, **kw):
     msh = mesh.create_rectangle(comm, [[0, 0], [1, 1]], [8, 8], cell_type, **opts)
     grid = fm.Grid(msh)
     p = fm.Particles.fill(grid, material or fm.LinearElastic(E=1e6, nu=0.3, density=1e3))
-    return fm.Simulation(grid, p, integrator, dt=1e-4, shape="auto", **kw)
+    kw.setdefault("shape", "auto")
+    return fm.Simulation(grid, p, integrator, dt=1e-4, **kw)
 
 
 @pytest.mark.parametrize("cell_type,family", [(mesh.CellType.quadrilateral, "cpgimp"),
@@ -35,11 +36,15 @@ def test_auto_falls_back_with_a_reason():
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit())
     sim.set_periodic(0)
     assert sim.shape == "mpm" and "periodic" in sim.shape_reason
-    for mat in (fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3),
-                fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)):
-        for cell in (mesh.CellType.quadrilateral, mesh.CellType.triangle):
-            sim = _sim(cell, fm.Explicit(), material=mat)
-            assert sim.shape == "mpm" and type(mat).__name__ in sim.shape_reason, sim.shape_reason
+    mc = fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3)
+    for cell in (mesh.CellType.quadrilateral, mesh.CellType.triangle):
+        sim = _sim(cell, fm.Explicit(), material=mc)
+        assert sim.shape == "mpm" and "MohrCoulomb" in sim.shape_reason, sim.shape_reason
+    vm = fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)
+    sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), material=vm)
+    assert sim.shape == "cpgimp" and "Prandtl" in sim.shape_reason, sim.shape_reason
+    sim = _sim(mesh.CellType.triangle, fm.Explicit(), material=vm)
+    assert sim.shape == "mpm" and "von Mises" in sim.shape_reason, sim.shape_reason
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(),
                material=fm.NeoHookean(E=1e6, nu=0.3, density=1e3))
     assert sim.shape == "cpgimp"
@@ -83,3 +88,27 @@ def test_unsupported_family_says_what_auto_would_pick():
     p = fm.Particles.fill(grid, fm.LinearElastic(E=1e6, nu=0.3, density=1e3))
     with pytest.raises(ValueError, match="structured grid.*shape='auto' would pick 'cpdi2'"):
         fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape="cpgimp")
+
+
+def test_fbar_auto_follows_the_materials_and_the_integrator():
+    """fbar="auto" (setup.SetupMixin._resolve_fbar, issue 21): on with a von Mises material
+    where the integrator supports it (explicit with any family; implicit with the standard
+    family), off for other materials, with fbar_reason naming why; an explicit value is kept."""
+    vm = fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)
+    mc = fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3)
+    quad = mesh.CellType.quadrilateral
+    sim = _sim(quad, fm.Explicit(), material=vm)
+    assert sim.fbar is True and sim.shape == "cpgimp" and "von Mises" in sim.fbar_reason
+    sim = _sim(quad, fm.QuasiStatic(), material=vm)
+    assert sim.fbar is True and sim.shape == "mpm"
+    sim = _sim(quad, fm.Newmark(), material=vm, shape="cpgimp")
+    assert sim.fbar is False and "standard family" in sim.fbar_reason
+    sim = _sim(quad, fm.Explicit(), material=vm, force_integration="mixed")
+    assert sim.fbar is False and "mixed" in sim.fbar_reason
+    for mat in (mc, None):
+        sim = _sim(quad, fm.Explicit(), material=mat)
+        assert sim.fbar is False and "no von Mises" in sim.fbar_reason
+    assert _sim(quad, fm.Explicit(), material=mc, fbar=True).fbar is True
+    assert _sim(quad, fm.Explicit(), material=vm, fbar=False).fbar is False
+    with pytest.raises(ValueError, match="'fbar' must be True, False or 'auto'"):
+        _sim(quad, fm.Explicit(), fbar="yes")

@@ -1,12 +1,12 @@
-"""Benchmark case `bearing-capacity`: Prandtl's smooth strip footing with and without F-bar,
-with the default shape family (standard MPM for the plastic soil) and with cpGIMP
-(issue 21; fenicsmpm.problems.footing, kernels.fbar).
+"""Benchmark case `bearing-capacity`: Prandtl's smooth strip footing with the library's
+defaults (shape="auto", fbar="auto": cpGIMP with F-bar for the von Mises soil) and with the
+standard family with and without F-bar (issue 21; fenicsmpm.problems.footing, kernels.fbar).
 
     python -m fenicsmpm.bench bearing-capacity [--quick] [--out DIR]
 
-Rows SHAPE-fbar-on/off: the default family with F-bar on and off and cpGIMP with F-bar, at
-cell sizes h = 0.25, 0.1 and 0.05 m (2, 5 and 10 cells under the half-width; without F-bar
-only the first two; quick: h = 0.25 only). The footing pressure q / (2 + pi) c_u is recorded
+Rows h<h>-default, h<h>-mpm-fbar-on, h<h>-mpm-fbar-off at cell sizes h = 0.25, 0.1 and 0.05 m
+(2, 5 and 10 cells under the half-width; without F-bar only the first two; quick: h = 0.25
+only). The footing pressure q / (2 + pi) c_u is recorded
 every step of the push to t_end = 0.8 s (settlement = problems.footing's settlement(t)) and
 averaged over each 0.1 s (an explicit reaction rings from step to step). Metrics: plateau =
 the time mean of q from t = 0.5 s on, its spread (max - min of the 0.1 s means there) and the
@@ -24,7 +24,10 @@ T_END = 0.8
 PLATEAU_FROM = 0.5
 
 
-def _row(h, use_fbar, shape, comm):
+ROWS = (("default", "auto", "auto"), ("mpm-fbar-on", "mpm", True), ("mpm-fbar-off", "mpm", False))
+
+
+def _row(h, name, shape, use_fbar, comm):
     from ..problems.footing import strip_footing
     sim, q, settlement = strip_footing(h=h, fbar=use_fbar, shape=shape, comm=comm)
     t0 = time.perf_counter()
@@ -40,10 +43,10 @@ def _row(h, use_fbar, shape, comm):
     late = np.array(t) >= PLATEAU_FROM + 0.1 - 1e-9        # the windows after t = 0.5 s
     plateau = float(np.mean(np.array(qs)[late]))
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=float(np.ptp(np.array(qs)[late])))
-    cfg = dict(integrator="ExplicitContact", scheme="MUSL", shape=sim.shape, fbar=use_fbar,
+    cfg = dict(integrator="ExplicitContact", scheme="MUSL", shape=sim.shape, fbar=sim.fbar,
                h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral", nu=0.49,
                cells_under_half_width=0.5 / h)
-    rec = common.make_record(f"h{h:g}-{shape}-fbar-{'on' if use_fbar else 'off'}", cfg,
+    rec = common.make_record(f"h{h:g}-{name}", cfg,
                              sim.particles.n_global(), common.global_cells(sim),
                              sim.step_count, wall, m)
     rec["curve"] = dict(settlement_mm=[1e3 * x for x in d], pressure=qs)
@@ -55,10 +58,10 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
     for h in ((0.25,) if quick else (0.25, 0.1, 0.05)):
-        for shape, use_fbar in (("auto", True), ("auto", False), ("cpgimp", True)):
-            if h < 0.1 and not use_fbar:
+        for name, shape, use_fbar in ROWS:
+            if h < 0.1 and use_fbar is False:
                 continue
-            r = _row(h, use_fbar, shape, comm)
+            r = _row(h, name, shape, use_fbar, comm)
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} (2 + pi) c_u, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")

@@ -24,11 +24,14 @@ def choose_shape(sim):
     gives 49 % / 85 % against 102 % / 96 % (rms 7.1 % / 11 % against 9.7 % / 15 %). The standard
     family where a wide one is not available or measured worse: implicit integrators (the
     wide-stencil implicit assembly is several times slower), force_integration="mixed",
-    plastic materials (`plastic` set: MohrCoulomb, VonMises, Hypoplastic; with cpGIMP the L4
+    plastic materials other than VonMises (`plastic` set: MohrCoulomb, Hypoplastic; with cpGIMP the L4
     slope's strength-reduction factor at failure is 0.625-0.672 against 0.531-0.578 with the
     standard family, 0.49 from the infinite slope and about 0.46 from the seed's phi > 35 deg
     threshold (with pure FLIP: 0.65 against 0.39-0.44, the L3 collapse did not stop), and the
-    jacked pile's resistance 50 kN against 24 kN and an estimate of 7 kN). Under MPI a mesh
+    jacked pile's resistance 50 kN against 24 kN and an estimate of 7 kN). VonMises gets cpGIMP on
+    a lattice (with F-bar, Simulation fbar="auto"): Prandtl's smooth footing (bench
+    bearing-capacity) 1.165 / 1.031 / 1.022 (2+pi) c_u at 2 / 5 / 10 cells under B/2 against
+    1.065 / 0.994 / 0.852 standard; elsewhere the standard family. Under MPI a mesh
     without the vertex ghost layer gets it (Grid.ensure_vertex_ring, called by the
     Simulation). Collective."""
     from .gimp import lattice
@@ -38,15 +41,19 @@ def choose_shape(sim):
     if sim.force_integration != "particles":
         return "mpm", f"force_integration={sim.force_integration!r} needs the standard family"
     plastic = sorted({type(m).__name__ for m in sim.particles.materials if getattr(m, "plastic", False)})
-    if plastic:
+    if set(plastic) - {"VonMises"}:
         return "mpm", (f"plastic material ({', '.join(plastic)}): failure loads come out higher "
                        f"with the wide families (L4 slope F_s 0.63-0.67 with cpGIMP, "
                        f"0.53-0.58 standard, infinite slope 0.49)")
     try:
         lattice(grid)
-        return "cpgimp", "structured axis-aligned grid"
+        return "cpgimp", "structured axis-aligned grid" + (
+            " (von Mises: Prandtl's footing 1.022 (2+pi) c_u with F-bar at 10 cells under B/2, "
+            "standard 0.852)" if plastic else "")
     except ValueError:
         pass
+    if plastic:
+        return "mpm", "von Mises material on a mesh that is not a structured lattice (wide families not measured there)"
     if grid.axisymmetric:
         return "mpm", "axisymmetric grid that is not a structured lattice"
     if grid.gdim == 2:
