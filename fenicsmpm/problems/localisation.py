@@ -121,7 +121,7 @@ def prandtl_band_length(half_width):
 
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
-                  half_width=0.25, m=2.0, cuts=3, softening=True, fbar=False):
+                  half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto"):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
     size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
@@ -133,7 +133,8 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     iterations, completed/stop message and the time split (step wall, nonlocal).  A step
     whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts).
     softening=False: the perfectly plastic soil (peak strength); fbar: Simulation(fbar=...)
-    (F-bar with its consistent tangent, kernels.fbar)."""
+    (F-bar with its consistent tangent, kernels.fbar; "auto", the library default, turns it
+    on for this von Mises soil)."""
     from mpi4py import MPI
     comm = MPI.COMM_WORLD if comm is None else comm
     top = depth + max(2.0 * h, 0.25)               # empty cells above the soil for the heave
