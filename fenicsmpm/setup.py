@@ -332,7 +332,7 @@ class SetupMixin:
         VonMises (isochoric plastic flow locks: Prandtl's smooth footing, bench bearing-capacity,
         1.80 (2+pi) c_u without F-bar at 5 cells under B/2, 0.994 standard / 1.031 cpGIMP with
         it; the implicit W5 footing at peak strength 1.249 -> 0.929) and the integrator supports
-        it; off otherwise: with Mohr-Coulomb the granular collapse against Lube et al.'s law
+        it (explicit: every grid; implicit: plane and 3D grids); off otherwise: with Mohr-Coulomb the granular collapse against Lube et al.'s law
         (problems.granular_collapse, h = min(L0, H0) / 16) ran out +10.9 / +25.3 / +23.2 % at
         a = 1 / 2 / 4 with F-bar against +2.5 / +17.8 / +15.7 % without, its heights -22 / -30 /
         -43 % against -8 / -16 / -34 %. Logged once (rank 0)."""
@@ -345,8 +345,8 @@ class SetupMixin:
             on, why = False, "not implemented for the DM-GC integrators"
         elif self.force_integration != "particles":
             on, why = False, f"force_integration={self.force_integration!r}"
-        elif not self.integrator.explicit and (self.shape != "mpm" or self.axisymmetric):
-            on, why = False, "implicit F-bar needs the standard family on a plane or 3D grid"
+        elif not self.integrator.explicit and self.axisymmetric:
+            on, why = False, "implicit F-bar needs a plane or 3D grid"
         else:
             on, why = True, "von Mises material: isochoric plastic flow locks without it"
         self.fbar, self.fbar_reason = on, why

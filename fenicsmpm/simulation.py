@@ -68,9 +68,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     with Gauss-point integration of the internal force, fenicsmpm.integrators.mixed_integration).
     fbar: the incremental deformation gradient's volume change is averaged over each cell
     (kernels.fbar, F-bar) against volumetric locking under isochoric plastic flow (the Prandtl
-    footing's limit pressure, problems.footing); explicit integrators, and implicit ones with
-    the standard shape family on plane or 3D grids (F-bar's consistent, unsymmetric tangent,
-    kernels.fbar.fbar_stiffness); not the DM-GC integrators. "auto" (default): on where a
+    footing's limit pressure, problems.footing); explicit integrators, and implicit ones on
+    plane or 3D grids (F-bar's consistent, unsymmetric tangent, kernels.fbar.fbar_stiffness,
+    every shape family); not the DM-GC integrators. "auto" (default): on where a
     deformable particle is VonMises and the integrator supports it, off otherwise (chosen by
     data, setup.SetupMixin._resolve_fbar); the choice and its reason are `fbar` and
     `fbar_reason`.

@@ -92,8 +92,8 @@ def test_unsupported_family_says_what_auto_would_pick():
 
 def test_fbar_auto_follows_the_materials_and_the_integrator():
     """fbar="auto" (setup.SetupMixin._resolve_fbar, issue 21): on with a von Mises material
-    where the integrator supports it (explicit with any family; implicit with the standard
-    family), off for other materials, with fbar_reason naming why; an explicit value is kept."""
+    where the integrator supports it (explicit; implicit on plane and 3D grids), off for
+    other materials, with fbar_reason naming why; an explicit value is kept."""
     vm = fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)
     mc = fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3)
     quad = mesh.CellType.quadrilateral
@@ -102,7 +102,7 @@ def test_fbar_auto_follows_the_materials_and_the_integrator():
     sim = _sim(quad, fm.QuasiStatic(), material=vm)
     assert sim.fbar is True and sim.shape == "mpm"
     sim = _sim(quad, fm.Newmark(), material=vm, shape="cpgimp")
-    assert sim.fbar is False and "standard family" in sim.fbar_reason
+    assert sim.fbar is True and sim.shape == "cpgimp"
     sim = _sim(quad, fm.Explicit(), material=vm, force_integration="mixed")
     assert sim.fbar is False and "mixed" in sim.fbar_reason
     for mat in (mc, None):

@@ -65,13 +65,11 @@ class _Newton:
     def setup(self, sim):
         """Build the PETSc linear system on the grid (integrator protocol: called once)."""
         shape = getattr(sim, "shape", "mpm")        # wide shapes: a pattern over cell rings
-        if sim.fbar and (shape != "mpm" or sim.axisymmetric or sim.layers):
+        if sim.fbar and (sim.axisymmetric or sim.layers):
             raise NotImplementedError(
-                f"{type(self).__name__}: fbar=True needs the standard shape family (shape='mpm' "
-                f"or 'auto'), a plane or 3D grid and no particle layers (its tangent couples the "
-                f"particles of a cell through the cell's nodes; got shape={shape!r}"
-                f"{', an axisymmetric grid' if sim.axisymmetric else ''}"
-                f"{', particle layers' if sim.layers else ''})")
+                f"{type(self).__name__}: fbar=True needs a plane or 3D grid and no particle "
+                f"layers (got{' an axisymmetric grid' if sim.axisymmetric else ''}"
+                f"{' particle layers' if sim.layers else ''})")
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape)
 

@@ -127,8 +127,9 @@ class LinearSystem:
             kt.assemble_stiffness(self.grid.D, nodes, dN, V, A4, plan, self.nodeptr, constrained,
                                   self.data)
         else:
-            fbar_stiffness(self.grid.D, nodes, dN, V, A4, *fbar, plan, self.nodeptr, constrained,
-                           self.data)
+            bad = fbar_stiffness(self.grid.D, nodes, dN, V, A4, *fbar, plan, self.nodeptr,
+                                 self.adj, constrained, self.data)
+            self._raise_outside(bad, "F-bar couples the nodes of the particles of its cell")
         if extra is not None:
             extra(self.data)
         own = self.n_owned_dofs
@@ -139,6 +140,17 @@ class LinearSystem:
         self.A.zeroEntries()
         self.A.setValuesLocalCSR(self.indptr, self.indices, self.data, addv=PETSc.InsertMode.ADD)
         self.A.assemble()
+
+    def _raise_outside(self, bad, what):
+        """Collective: raise on every rank when a rank found a node pair outside the pattern
+        (bad >= 0: its local particle), never a dropped term."""
+        comm = self.grid.comm
+        anywhere = comm.allreduce(int(bad >= 0)) if comm.size > 1 else int(bad >= 0)
+        if anywhere:
+            raise RuntimeError(f"implicit shape={self.shape!r}: {what}, and a pair of them is "
+                               f"more than {self.rings} cell rings apart (local particle {bad}"
+                               f"{'' if bad >= 0 else ' on another rank'}): outside the static "
+                               f"matrix pattern; refine the grid or use fewer particles per cell")
 
     def add(self, B):
         """K += B for a matrix whose pattern is within K's (dolfinx forms on the same space)."""
@@ -183,10 +195,19 @@ def stencil_rings(sim):
     lattice, where corners at most a cell apart lie in cells that share a vertex). Gauss-GIMP
     ("gauss"): its Gauss points lie inside the same pushed-forward voxel, so the CPDI bound
     holds. Quadratic B-splines ("bspline2"): a particle's nodes are the 3 nearest per axis, at
-    most 2 lattice steps apart: rings = 2."""
+    most 2 lattice steps apart: rings = 2. With F-bar (sim.fbar) a wide family's particle
+    couples its nodes with those of every particle of its cell (kernels.fbar.fbar_stiffness):
+    one ring more."""
     shape = getattr(sim, "shape", "mpm")
     if shape == "mpm":
         return 1
+    if getattr(sim, "fbar", False):      # F-bar: a node of p meets the nodes of its cell-mates
+        return _family_rings(sim, shape) + 1
+    return _family_rings(sim, shape)
+
+
+def _family_rings(sim, shape):
+    """stencil_rings of a wide family without F-bar."""
     if shape in ("ugimp", "cpgimp"):
         p, lat = sim.particles, sim._wide.lat
         d = sim.gdim

@@ -36,70 +36,116 @@ def fbar(cell, V, dF, n_cells, n):
 
 
 @njit(cache=True)
-def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, constrained, data):
+def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, adj, constrained,
+                   data):
     """The consistent (unsymmetric) tangent of the F-bar residual f_i = -sum_p V_p
-    P(dFbar_p) grad N_ip for the standard family (every particle of a cell has the cell's
-    nodes in the same order), added to the CSR values `data` (skipping constrained rows and
-    columns); dF0: the increments before averaging, A = dP/dF at dFbar. With
-    J_q = det dF0_q, Jbar = sum_q V_q J_q / sum_q V_q, s_p = (Jbar / J_p)^(1/n) and
-    h_qa = dF0_q^-T grad N_aq (so dJ_q = J_q sum_a du_a . h_qa),
+    P(dFbar_p) grad N_ip, for every shape family, added to the CSR values `data` (pattern
+    nodeptr/adj; skipping constrained rows and columns); dF0: the increments before
+    averaging, A = dP/dF at dFbar. With J_q = det dF0_q, Jbar = sum_q V_q J_q / sum_q V_q
+    over the particles q of p's cell, s_p = (Jbar / J_p)^(1/n) and h_qa = dF0_q^-T grad N_aq
+    (so dJ_q = J_q sum_a du_a . h_qa),
         d dFbar_p = s_p [d dF0_p + (1/n) dF0_p (sum_b du_b . (Hbar_b - h_pb))],
-        Hbar_b = sum_q V_q J_q h_qb / sum_q V_q J_q,
-    (de Souza Neto et al. 1996 eq 24 in increment form) and the block of nodes (a, b)
-        K_ab[r, c] = V_p grad N_ap,J A_p[r, J, K, L] d dFbar_p[K, L] / d u_b,c
-    with K, L < n in the averaging term (the in-plane block in plane strain); a particle
-    whose J_p or Jbar is not positive is not averaged (fbar) and gets the plain block."""
+        Hbar_b = sum_q V_q J_q h_qb / sum_q V_q J_q   (b: the nodes of any particle of the cell)
+    (de Souza Neto et al. 1996 eq 24 in increment form). Particle p adds, for its nodes a,
+        K_ab[r, c] += V_p s_p (grad N_ap,J A_p[r, J, c, L] grad N_bp,L - Q_ap,r h_pb,c)   (its nodes b)
+        K_ab[r, c] += V_p s_p Q_ap,r Hbar_b,c / (sum_q V_q J_q)        (every node b of the cell)
+    with Q_ap,r = (1/n) grad N_ap,J A_p[r, J, K, L] dF0_p[K, L], K, L < n (the in-plane block in
+    plane strain); a particle whose J_p or Jbar is not positive is not averaged (fbar) and gets
+    the plain block. With the standard family a cell's nodes are its particles' nodes; a wide
+    family couples a node of p with the nodes of every particle of its cell, so the pattern
+    needs one cell ring more (linear_system.stencil_rings). Returns -1, or the first local
+    particle with a node pair outside the pattern (nothing is added for that pair)."""
     d = len(D)
     nv = nodes.shape[1]
-    sv = np.zeros(n_cells)
-    sj = np.zeros(n_cells)
-    Hb = np.zeros((n_cells, nv, d))
+    npart = nodes.shape[0]
+    first = np.zeros(n_cells + 1, dtype=np.int64)      # particles by cell (counting sort)
+    for p in range(npart):
+        first[cell[p] + 1] += 1
+    most = 0
+    for c in range(n_cells):
+        most = max(most, first[c + 1])
+        first[c + 1] += first[c]
+    order = np.empty(npart, dtype=np.int64)
+    fill = first[:n_cells].copy()
+    for p in range(npart):
+        order[fill[cell[p]]] = p
+        fill[cell[p]] += 1
+    J = np.empty(npart)
+    h = np.empty((npart, nv, d))
     inv = np.empty((3, 3))
-    J = np.empty(nodes.shape[0])
-    for q in range(nodes.shape[0]):
-        c = cell[q]
+    for q in range(npart):
         J[q] = inv3(dF0[q], inv)
-        w = V[q] * J[q]
-        sv[c] += V[q]
-        sj[c] += w
         for a in range(nv):
             for k in range(d):
-                h = 0.0
+                v = 0.0
                 for l in range(d):
-                    h += inv[l, k] * dN[q, a, l]
-                Hb[c, a, k] += w * h
+                    v += inv[l, k] * dN[q, a, l]
+                h[q, a, k] = v
+    U = np.empty(most * nv, dtype=np.int64)             # the nodes of a cell's particles
+    Hb = np.empty((most * nv, d))
     block = np.empty((d, d))
     Q = np.empty((d, d))
-    hp = np.empty((nv, d))
-    for p in range(nodes.shape[0]):
-        c = cell[p]
-        avg = J[p] > 0.0 and sj[c] > 0.0             # as fbar(): no averaging otherwise
-        s = (sj[c] / sv[c] / J[p]) ** (1.0 / n) if avg else 1.0
-        inv3(dF0[p], inv)
-        for a in range(nv):
-            for k in range(d):
-                h = 0.0
-                for l in range(d):
-                    h += inv[l, k] * dN[p, a, l]
-                hp[a, k] = h
-        for r in range(d):
-            for Jx in range(d):
-                v = 0.0
-                for K in range(n):
-                    for L in range(n):
-                        v += A[p, r, Jx, K, L] * dF0[p, K, L]
-                Q[r, Jx] = v / n
-        for a in range(nv):
-            i = nodes[p, a]
-            deg = nodeptr[i + 1] - nodeptr[i]
-            for b in range(nv):
+    qa = np.empty(d)
+    bad = -1
+    for c in range(n_cells):
+        if first[c + 1] == first[c]:
+            continue
+        nu = 0
+        sv = 0.0
+        sj = 0.0
+        for t in range(first[c], first[c + 1]):
+            q = order[t]
+            w = V[q] * J[q]
+            sv += V[q]
+            sj += w
+            for a in range(nv):
+                g = nodes[q, a]
+                u = 0
+                while u < nu and U[u] != g:
+                    u += 1
+                if u == nu:
+                    U[nu] = g
+                    for k in range(d):
+                        Hb[nu, k] = 0.0
+                    nu += 1
+                for k in range(d):
+                    Hb[u, k] += w * h[q, a, k]
+        for t in range(first[c], first[c + 1]):
+            p = order[t]
+            avg = J[p] > 0.0 and sj > 0.0              # as fbar(): no averaging otherwise
+            s = (sj / sv / J[p]) ** (1.0 / n) if avg else 1.0
+            for r in range(d):
+                for Jx in range(d):
+                    v = 0.0
+                    for K in range(n):
+                        for L in range(n):
+                            v += A[p, r, Jx, K, L] * dF0[p, K, L]
+                    Q[r, Jx] = v / n
+            for a in range(nv):
+                i = nodes[p, a]
+                lo, hi = nodeptr[i], nodeptr[i + 1]
                 for r in range(d):
-                    qa = 0.0
+                    v = 0.0
                     for Jx in range(d):
-                        qa += dN[p, a, Jx] * Q[r, Jx]
-                    for cc in range(d):
-                        v = stiffness_entry(dN, A, p, a, b, r, cc, d)
-                        if avg:
-                            v += qa * (Hb[c, b, cc] / sj[c] - hp[b, cc])
-                        block[r, cc] = V[p] * s * v
-                add_block(data, plan[p, a, b], deg, i, nodes[p, b], d, constrained, block)
+                        v += dN[p, a, Jx] * Q[r, Jx]
+                    qa[r] = v if avg else 0.0
+                for b in range(nv):
+                    for r in range(d):
+                        for cc in range(d):
+                            block[r, cc] = V[p] * s * (stiffness_entry(dN, A, p, a, b, r, cc, d)
+                                                       - qa[r] * h[p, b, cc])
+                    add_block(data, plan[p, a, b], hi - lo, i, nodes[p, b], d, constrained, block)
+                if not avg:
+                    continue
+                for u in range(nu):
+                    j = U[u]
+                    k = np.searchsorted(adj[lo:hi], j)
+                    if k >= hi - lo or adj[lo + k] != j:
+                        if bad < 0:
+                            bad = p
+                        continue
+                    for r in range(d):
+                        for cc in range(d):
+                            block[r, cc] = V[p] * s * qa[r] * Hb[u, cc] / sj
+                    add_block(data, lo * d * d + k * d, hi - lo, i, j, d, constrained, block)
+    return bad
