@@ -183,12 +183,13 @@ def _wait_for_quiet(max_wait, threshold=0.25):
 
 
 _PROBE = collections.defaultdict(float)
+NEWTON_FRAMES = ("solve_step", "newton_residual")     # integrators.implicit's Newton loop
 
 
 def _install_probes():
     """Wrap Particles.send_to_owners and Grid.accumulate with timers (worker process only).
     Exchange time is attributed to the stage that called it: "solve" for the Newton loop
-    (solve_step), "p2g" otherwise (the integrators' transfer part and external_force)."""
+    (NEWTON_FRAMES), "p2g" otherwise (the integrators' transfer part and external_force)."""
     import fenicsmpm as fm
     if getattr(fm.Particles.send_to_owners, "_bench_probe", False):
         return
@@ -211,7 +212,7 @@ def _install_probes():
             return acc(self, *arrays)
         finally:
             dt = time.perf_counter() - t0
-            _PROBE["exchange_solve" if caller == "solve_step" else "exchange_p2g"] += dt
+            _PROBE["exchange_solve" if caller in NEWTON_FRAMES else "exchange_p2g"] += dt
             _PROBE["exchange_calls"] += 1
 
 

@@ -139,7 +139,7 @@ class _Newton:
         idx = np.arange(n, dtype=np.int64)
         fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
 
-        def residual(du):
+        def newton_residual(du):
             """(R, |R|, fint, reaction, sig) at du; leaves sim._dF (and F-bar's dF0) at du."""
             self.strain_increment(sim, du)
             sig = sim.trial_stress(sim._dF)
@@ -170,7 +170,7 @@ class _Newton:
 
         it = 0
         t1 = time.perf_counter()
-        R, rnorm, fint, reaction, sig = residual(du)
+        R, rnorm, fint, reaction, sig = newton_residual(du)
         r0 = rnorm
         T["solve"] += time.perf_counter() - t1
         dnorm = np.inf
@@ -214,7 +214,7 @@ class _Newton:
             # |R| (class docstring); 0: the full Newton step
             alpha, prev = 1.0, rnorm
             for k in range(self.line_search + 1):
-                R, rnorm, fint, reaction, sig = residual(du + alpha * delta)
+                R, rnorm, fint, reaction, sig = newton_residual(du + alpha * delta)
                 if rnorm <= prev or k == self.line_search:
                     break
                 alpha *= 0.5
