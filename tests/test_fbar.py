@@ -159,8 +159,9 @@ def test_implicit_fbar_oedometer_is_exact(shape):
     oedometrically by 1e-3 of its height in two quasi-static steps carries the homogeneous
     sigma_yy = -M eps (M the constrained modulus) at every particle: standard family to
     round-off (measured 4.5e-13), cpGIMP to 2e-3 (measured 1.50e-3 at worst, 7.5e-7 on
-    average; 1.51e-3 without F-bar: cpGIMP's own error, not F-bar's); Newton converges in at
-    most 3 iterations per step."""
+    average; 1.51e-3 without F-bar: cpGIMP's own error, not F-bar's: the compressed body's top
+    lies eps H inside the top cell row, so the domains there fall short of the nodes' support
+    by O(eps H / h)); Newton converges in at most 3 iterations per step."""
     from dolfinx import mesh
     from mpi4py import MPI
     E, nu, eps = 1e6, 0.49, 1e-3
