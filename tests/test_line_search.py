@@ -1,8 +1,9 @@
 """Newton's backtracking line search (line_search=k of the implicit integrators,
 fenicsmpm.integrators.implicit), serially and under `mpirun -n 2`.
 
-Scene: fenicsmpm.problems.localisation.strip_footing with the soil of problems.footing
-(von Mises E = 10 MPa, nu = 0.49, c_u = 10 kPa; fbar="auto" turns F-bar on), a smooth rigid
+Scene: fenicsmpm.problems.localisation.strip_footing with material= the soil of
+problems.footing (von Mises E = 10 MPa, nu = 0.49, c_u = 10 kPa; fbar="auto" turns F-bar
+on), a smooth rigid
 strip B/2 = 0.5 m on a 5 m x 3 m weightless layer, h = 0.1 m, pushed 30 mm in 30 quasi-static
 steps without step cuts. Measured: the full Newton step diverges at the 27th step
 (t = 0.867); with line_search=6 every step converges and the pressure over the last third of
@@ -14,19 +15,16 @@ import fenicsmpm as fm
 from fenicsmpm.problems import localisation
 
 
-def _footing(monkeypatch, line_search):
-    monkeypatch.setattr(localisation, "soil",
-                        lambda *a, **k: fm.VonMises(E=10e6, nu=0.49, density=1800.0, c_u=1e4))
-    monkeypatch.setattr(localisation, "QuasiStatic",
-                        lambda **kw: fm.QuasiStatic(line_search=line_search, **kw))
-    return localisation.strip_footing(0.1, softening=False, settlement=0.03, steps=30,
-                                      width=5.0, depth=3.0, half_width=0.5, cuts=0)
+def _footing(line_search):
+    return localisation.strip_footing(
+        0.1, material=fm.VonMises(E=10e6, nu=0.49, density=1800.0, c_u=1e4), settlement=0.03,
+        steps=30, width=5.0, depth=3.0, half_width=0.5, cuts=0, line_search=line_search)
 
 
-def test_line_search_rescues_the_footing(monkeypatch):
-    full = _footing(monkeypatch, 0)
+def test_line_search_rescues_the_footing():
+    full = _footing(0)
     assert not full["completed"] and "Newton did not converge" in full["stopped"], full["stopped"]
-    ls = _footing(monkeypatch, 6)
+    ls = _footing(6)
     assert ls["completed"], ls["stopped"]
     q = ls["pressure"] / ((2.0 + np.pi) * 1e4)
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q

@@ -121,7 +121,8 @@ def prandtl_band_length(half_width):
 
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
-                  half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto"):
+                  half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
+                  material=None, line_search=0):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
     size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
@@ -134,7 +135,9 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts).
     softening=False: the perfectly plastic soil (peak strength); fbar: Simulation(fbar=...)
     (F-bar with its consistent tangent, kernels.fbar; "auto", the library default, turns it
-    on for this von Mises soil); shape: Simulation(shape=...)."""
+    on for this von Mises soil); shape: Simulation(shape=...); material: a material instead of
+    the W5 soil (then length, m and softening are not used), e.g. the Prandtl soil of
+    problems.footing; line_search: fm.QuasiStatic(line_search=...)."""
     from mpi4py import MPI
     comm = MPI.COMM_WORLD if comm is None else comm
     top = depth + max(2.0 * h, 0.25)               # empty cells above the soil for the heave
@@ -143,11 +146,12 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
                                  dmesh.CellType.quadrilateral)
     grid = Grid(msh)
     tol = 1e-6 * h
-    pts = Particles.fill(grid, soil(length, m, softening), per_cell=2,
+    pts = Particles.fill(grid, soil(length, m, softening) if material is None else material,
+                         per_cell=2,
                          region=lambda x: x[:, 1] < depth)
     under = lambda x: (np.abs(x[:, 1] - depth) < tol) & (x[:, 0] <= half_width + tol)
     qs = QuasiStatic(displacement=lambda x, t: np.column_stack(
-        [np.zeros(len(x)), np.where(under(x), -settlement * t, 0.0)]))
+        [np.zeros(len(x)), np.where(under(x), -settlement * t, 0.0)]), line_search=line_search)
     sim = Simulation(grid, pts, qs, dt=1.0 / steps, max_dt_cuts=cuts, fbar=fbar, shape=shape)
     sim.fix(lambda x: np.abs(x[:, 1]) < tol)
     sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - width) < tol), [0])
