@@ -319,7 +319,7 @@ class SetupMixin:
                                       f"force_integration={force_integration!r}")
         if shape not in SHAPES:
             raise ValueError(f"Simulation: 'shape' must be one of {SHAPES}, got {shape!r}")
-        if isinstance(fbar, str) and fbar != "auto" or fbar not in (True, False, "auto"):
+        if fbar not in (True, False, "auto"):
             raise ValueError(f"Simulation: 'fbar' must be True, False or 'auto', got {fbar!r}")
         if fbar is True and getattr(self.integrator, "double_mapping", False):
             raise NotImplementedError("Simulation: fbar=True is not implemented for the "
@@ -332,7 +332,8 @@ class SetupMixin:
         VonMises (isochoric plastic flow locks: Prandtl's smooth footing, bench bearing-capacity,
         1.80 (2+pi) c_u without F-bar at 5 cells under B/2, 0.994 standard / 1.031 cpGIMP with
         it; the implicit W5 footing at peak strength 1.249 -> 0.929) and the integrator supports
-        it (explicit: every grid; implicit: plane and 3D grids); off otherwise: with Mohr-Coulomb the granular collapse against Lube et al.'s law
+        it (explicit: every grid; implicit: plane and 3D grids, no particle layers, add_boundary);
+        off otherwise: with Mohr-Coulomb the granular collapse against Lube et al.'s law
         (problems.granular_collapse, h = min(L0, H0) / 16) ran out +10.9 / +25.3 / +23.2 % at
         a = 1 / 2 / 4 with F-bar against +2.5 / +17.8 / +15.7 % without, its heights -22 / -30 /
         -43 % against -8 / -16 / -34 %. Logged once (rank 0)."""

@@ -112,3 +112,21 @@ def test_fbar_auto_follows_the_materials_and_the_integrator():
     assert _sim(quad, fm.Explicit(), material=vm, fbar=False).fbar is False
     with pytest.raises(ValueError, match="'fbar' must be True, False or 'auto'"):
         _sim(quad, fm.Explicit(), fbar="yes")
+
+
+def test_fbar_auto_leaves_implicit_particle_layers_alone():
+    """Implicit F-bar does not support particle layers: with fbar="auto" adding one turns
+    F-bar off (fbar_reason says why), with fbar=True it raises naming the option."""
+    vm = fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)
+    layer = lambda: fm.ParticleLayer(fm.Viscous(lambda x: x[:, 1] < 0.2),
+                                     region=lambda x: x[:, 1] < 0.2, normal=(0.0, -1.0))
+    sim = _sim(mesh.CellType.quadrilateral, fm.Newmark(), material=vm)
+    assert sim.fbar is True
+    sim.add_boundary(layer())
+    assert sim.fbar is False and "particle layers" in sim.fbar_reason
+    sim = _sim(mesh.CellType.quadrilateral, fm.Newmark(), material=vm, fbar=True)
+    with pytest.raises(NotImplementedError, match="fbar=False"):
+        sim.add_boundary(layer())
+    sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), material=vm)
+    sim.add_boundary(layer())
+    assert sim.fbar is True                              # explicit F-bar keeps the layer
