@@ -56,7 +56,6 @@ class _Newton:
                              f"got {line_search!r}")
         self.rtol, self.utol, self.max_iter, self.flip = rtol, utol, max_iter, float(flip)
         self.line_search = line_search
-        self.backtracks = 0      # line-search halvings over the run
         self.petsc_options, self.prefix = petsc_options, prefix
         self.system = None
         self.iterations = []     # Newton iterations per step
@@ -65,11 +64,9 @@ class _Newton:
     def setup(self, sim):
         """Build the PETSc linear system on the grid (integrator protocol: called once)."""
         shape = getattr(sim, "shape", "mpm")        # wide shapes: a pattern over cell rings
-        if sim.fbar and (sim.axisymmetric or sim.layers):
-            raise NotImplementedError(
-                f"{type(self).__name__}: fbar=True needs a plane or 3D grid and no particle "
-                f"layers (got{' an axisymmetric grid' if sim.axisymmetric else ''}"
-                f"{' particle layers' if sim.layers else ''})")
+        if sim.fbar and sim.axisymmetric:          # particle layers: SetupMixin.add_boundary
+            raise NotImplementedError(f"{type(self).__name__}: fbar=True needs a plane or 3D "
+                                      f"grid (got an axisymmetric grid)")
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape)
 
@@ -218,7 +215,6 @@ class _Newton:
                 if rnorm <= prev or k == self.line_search:
                     break
                 alpha *= 0.5
-            self.backtracks += k
             du += alpha * delta
             dnorm = alpha * self._norm(sim, delta)
             T["solve"] += time.perf_counter() - t2
