@@ -13,11 +13,41 @@ def _ksp(sim):
     return ksp.getType(), ksp.getPC().getType()
 
 
-def test_default_is_direct_lu_and_options_do_not_leak():
+def test_defaults_and_options_do_not_leak():
+    """Newmark (dynamic) defaults to GMRES + block Jacobi, QuasiStatic to a direct LU."""
     sim, _ = vibrating_bar(fm.Newmark(petsc_options={"ksp_type": "cg", "pc_type": "jacobi"}))
     assert _ksp(sim) == ("cg", "jacobi")
+    assert not sim.integrator.system.fallback, "options given: no switch to LU"
     sim2, _ = vibrating_bar(fm.Newmark())
-    assert _ksp(sim2) == ("preonly", "lu"), "petsc_options of one simulation leaked into the next"
+    assert _ksp(sim2) == ("gmres", "bjacobi"), "petsc_options of one simulation leaked into the next"
+    assert sim2.integrator.system.fallback
+    sim3, _ = vibrating_bar(fm.QuasiStatic())
+    assert _ksp(sim3) == ("preonly", "lu")
+
+
+def test_failed_iterative_default_switches_to_lu(monkeypatch, caplog):
+    """When the default GMRES fails (here: unpreconditioned, limited to 1 iteration) the same system is solved
+    again by LU, logged once, and LU stays: the run equals an LU run to round-off."""
+    from fenicsmpm.integrators import linear_system as ls
+    monkeypatch.setitem(ls.ITERATIVE, "ksp_max_it", 1)
+    monkeypatch.setitem(ls.ITERATIVE, "pc_type", "none")
+    res = []
+    for opts in (None, {"ksp_type": "preonly", "pc_type": "lu",
+                        **({"pc_factor_mat_solver_type": "mumps"} if fm_size() > 1 else {})}):
+        sim, _ = vibrating_bar(fm.Newmark(petsc_options=opts))
+        with caplog.at_level("WARNING", logger="fenicsmpm"):
+            sim.run(steps=5)
+        res.append(np.concatenate(sim.comm.allgather(sim.particles.v[np.argsort(sim.particles.id)])))
+        if opts is None:
+            assert _ksp(sim) == ("preonly", "lu") and not sim.integrator.system.fallback
+            if sim.comm.rank == 0:
+                assert sum("using the direct LU solver" in r.getMessage() for r in caplog.records) == 1
+    assert np.max(np.abs(res[0] - res[1])) <= 1e-12 * np.max(np.abs(res[1]))
+
+
+def fm_size():
+    from mpi4py import MPI
+    return MPI.COMM_WORLD.size
 
 
 def test_command_line_options_reach_the_ksp():
@@ -35,13 +65,16 @@ def test_command_line_options_reach_the_ksp():
 
 
 def test_iterative_and_direct_give_the_same_step():
-    """CG + Jacobi at a tight tolerance reproduces the LU result to 1e-9 after 10 steps."""
+    """CG + Jacobi at a tight tolerance and the default GMRES reproduce the LU result to 1e-9
+    after 10 steps."""
     res = []
-    for opts in (None, {"ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-13}):
+    lu = {"ksp_type": "preonly", "pc_type": "lu", **({"pc_factor_mat_solver_type": "mumps"} if fm_size() > 1 else {})}
+    for opts in (lu, {"ksp_type": "cg", "pc_type": "jacobi", "ksp_rtol": 1e-13}, None):
         sim, _ = vibrating_bar(fm.Newmark(petsc_options=opts))
         sim.run(steps=10)
         res.append(np.concatenate(sim.comm.allgather(sim.particles.v[np.argsort(sim.particles.id)])))
     assert np.max(np.abs(res[0] - res[1])) < 1e-9 * np.max(np.abs(res[0]))
+    assert np.max(np.abs(res[0] - res[2])) < 1e-9 * np.max(np.abs(res[0]))
 
 
 def test_observer_called_every_n_steps():

@@ -37,6 +37,7 @@ from .linear_system import DEFAULT_PREFIX, LinearSystem, stencil_rings
 
 class _Newton:
     explicit = False
+    iterative_default = False         # default KSP: direct LU (LinearSystem)
     reports_reaction = True             # sim.nodal["reaction"] after each step
 
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
@@ -68,7 +69,8 @@ class _Newton:
             raise NotImplementedError(f"{type(self).__name__}: fbar=True needs a plane or 3D "
                                       f"grid (got an axisymmetric grid)")
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
-                                   rings=stencil_rings(sim), shape=shape)
+                                   rings=stencil_rings(sim), shape=shape,
+                                   iterative=self.iterative_default)
 
     def strain_increment(self, sim, du):
         """sim._dF <- I + sum_i du_i (x) grad N_ip (the step's incremental deformation gradient);
@@ -232,6 +234,7 @@ class Newmark(_Newton):
 
     alpha_m = alpha_f = 0.0
     records_work = True
+    iterative_default = True          # default KSP: GMRES + block Jacobi, LU if it fails
 
     def __init__(self, beta=0.25, gamma=0.5, **kw):
         super().__init__(**kw)
