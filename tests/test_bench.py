@@ -98,13 +98,16 @@ def test_implicit_dt_is_five_critical(tiny):
     _, doc = tiny
     cfg = doc["runs"][1]["config"]
     assert math.isclose(cfg["dt"], 5.0 * cfg["dt_critical"], rel_tol=1e-12)
+    assert cfg["shape_family"] == "cpgimp"            # shape="auto" resolved (elastic, lattice)
+    assert (cfg["ksp_type"], cfg["pc_type"]) == ("gmres", "bjacobi")      # Newmark's default
 
 
 def test_scenes_full_size():
     """Full-size problem sizes as specified (without running them)."""
     full = {s["name"]: s for s in throughput.scenes(quick=False)}
     assert set(full) == {"explicit-MUSL", "explicit-USL", "explicit-USF", "implicit-Newmark",
-                         "implicit-Newmark-gmres"}
+                         "implicit-Newmark-mpm", "implicit-Newmark-mpm-lu"}
+    assert full["implicit-Newmark"]["shape"] == "auto"          # the defaults
     for s in full.values():
         cfg = throughput.scene_config(s)
         bx, by = cfg["block_cells"]

@@ -30,7 +30,8 @@ def test_auto_picks_the_wide_family_of_the_mesh(cell_type, family):
 
 
 def test_auto_falls_back_with_a_reason():
-    assert _sim(mesh.CellType.quadrilateral, fm.Newmark()).shape_reason.startswith("implicit")
+    assert _sim(mesh.CellType.quadrilateral, fm.Newmark()).shape == "cpgimp"     # elastic
+    assert _sim(mesh.CellType.triangle, fm.Newmark()).shape_reason.startswith("implicit")
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), force_integration="mixed")
     assert sim.shape == "mpm" and "mixed" in sim.shape_reason
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit())
@@ -45,6 +46,8 @@ def test_auto_falls_back_with_a_reason():
     assert sim.shape == "cpgimp" and "Prandtl" in sim.shape_reason, sim.shape_reason
     sim = _sim(mesh.CellType.triangle, fm.Explicit(), material=vm)
     assert sim.shape == "mpm" and "von Mises" in sim.shape_reason, sim.shape_reason
+    sim = _sim(mesh.CellType.quadrilateral, fm.QuasiStatic(), material=vm)
+    assert sim.shape == "mpm" and "implicit" in sim.shape_reason, sim.shape_reason
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(),
                material=fm.NeoHookean(E=1e6, nu=0.3, density=1e3))
     assert sim.shape == "cpgimp"

@@ -11,14 +11,14 @@ E, NU, RHO = 1e7, 0.0, 1000.0
 P = 1e4       # traction magnitude (Pa); strain P/M = 1e-3
 
 
-def _column(integrator, dt, cell_type=mesh.CellType.quadrilateral, value=(0.0, -P)):
+def _column(integrator, dt, cell_type=mesh.CellType.quadrilateral, value=(0.0, -P), shape="auto"):
     comm = MPI.COMM_WORLD
     h = H / NY
     msh = mesh.create_rectangle(comm, [[0, 0], [W, H]], [1, NY], cell_type)
     grid = fm.Grid(msh)
     mat = fm.LinearElastic(E=E, nu=NU, density=RHO)
     pts = fm.Particles.fill(grid, mat, per_cell=2)
-    sim = fm.Simulation(grid, pts, integrator, dt=dt)
+    sim = fm.Simulation(grid, pts, integrator, dt=dt, shape=shape)
     sim.fix(lambda x: np.isclose(x[:, 0], 0) | np.isclose(x[:, 0], W), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0), [1])
     sim.add_traction(lambda x: np.isclose(x[:, 1], H), value)
@@ -27,8 +27,11 @@ def _column(integrator, dt, cell_type=mesh.CellType.quadrilateral, value=(0.0, -
 
 @pytest.mark.parametrize("cell_type", [mesh.CellType.quadrilateral, mesh.CellType.triangle])
 def test_quasistatic_top_traction(cell_type):
-    """Uniform compression: sigma_yy = -P everywhere, top settlement P H / M (to 0.5 %)."""
-    sim, mat, h = _column(fm.QuasiStatic(load_steps=1), 1.0, cell_type)
+    """Uniform compression: sigma_yy = -P everywhere, top settlement P H / M (to 0.5 %).
+    Standard family (exact here, -0.1 %): with the implicit default cpGIMP the interior
+    particles read within 2e-4 but the top two rows 1.6 % low, because their boxes have
+    settled u_top = 4 mm (1.6 % of h) below the loaded facet, which stays on the mesh."""
+    sim, mat, h = _column(fm.QuasiStatic(load_steps=1), 1.0, cell_type, shape="mpm")
     sim.run(steps=2)
     p = sim.particles
     M = mat.constrained_modulus

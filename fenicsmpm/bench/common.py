@@ -196,13 +196,14 @@ def check_cells(case, name, cells, minimum=2, count=2):
 
 def sweep(series, cells, run_one, comm, describe=None):
     """Refinement sweep: per series (a tuple of run_one's leading arguments) an untimed
-    warm-up run_one(*series, 2, comm) (JIT / cache loading; its time in jit["a b c"]), then
+    warm-up run_one(*series, n0, comm) with n0 the smallest of cells(series) (JIT / cache
+    loading; its time in jit["a b c"]; at 2 cells implicit cpGIMP's Newton fails on V3), then
     run_one(*series, n, comm) for n in cells(series). describe(record): a progress line.
     Returns (runs, jit)."""
     runs, jit = [], {}
     for s in series:
         t0 = time.perf_counter()
-        run_one(*s, 2, comm)
+        run_one(*s, min(cells(s)), comm)
         jit[" ".join(s)] = gmax(comm, time.perf_counter() - t0)
         for n in cells(s):
             runs.append(run_one(*s, n, comm))

@@ -22,8 +22,8 @@ def choose_shape(sim):
     CPDI1 2.8 % / 1.4 % against standard MPM 73 % / 92 % at 10 / 20 cells over H; with the
     8 Gauss-Jacobi particles of Particles.fill(per_cell=2) the shrunk cells overlap and CPDI1
     gives 49 % / 85 % against 102 % / 96 % (rms 7.1 % / 11 % against 9.7 % / 15 %). The standard
-    family where a wide one is not available or measured worse: implicit integrators (the
-    wide-stencil implicit assembly is several times slower), force_integration="mixed",
+    family where a wide one is not available or measured worse: implicit integrators with a
+    plastic material or on meshes that are not lattices, force_integration="mixed",
     plastic materials other than VonMises (`plastic` set: MohrCoulomb, Hypoplastic; with cpGIMP the L4
     slope's strength-reduction factor at failure is 0.625-0.672 against 0.531-0.578 with the
     standard family, 0.49 from the infinite slope and about 0.46 from the seed's phi > 35 deg
@@ -36,11 +36,13 @@ def choose_shape(sim):
     Simulation). Collective."""
     from .gimp import lattice
     grid = sim.grid
-    if not sim.integrator.explicit:
-        return "mpm", "implicit integrator (the wide-stencil implicit assembly is several times slower)"
     if sim.force_integration != "particles":
         return "mpm", f"force_integration={sim.force_integration!r} needs the standard family"
     plastic = sorted({type(m).__name__ for m in sim.particles.materials if getattr(m, "plastic", False)})
+    implicit = not sim.integrator.explicit
+    if implicit and plastic:
+        return "mpm", (f"implicit integrator with a plastic material ({', '.join(plastic)}): "
+                       f"Newton diverged earlier with cpGIMP on the footing scenes")
     if set(plastic) - {"VonMises"}:
         return "mpm", (f"plastic material ({', '.join(plastic)}): failure loads come out higher "
                        f"with the wide families (L4 slope F_s 0.63-0.67 with cpGIMP, "
@@ -52,6 +54,8 @@ def choose_shape(sim):
             "standard 0.852)" if plastic else "")
     except ValueError:
         pass
+    if implicit:
+        return "mpm", "implicit integrator on a mesh that is not a structured lattice (wide families not measured there)"
     if plastic:
         return "mpm", "von Mises material on a mesh that is not a structured lattice (wide families not measured there)"
     if grid.axisymmetric:
