@@ -8,7 +8,6 @@ import numpy as np
 import ufl
 from dolfinx import fem
 import dolfinx.fem.petsc
-from numba import njit
 from petsc4py import PETSc
 
 from ..shapes import standard as kt_shape
@@ -112,10 +111,7 @@ class LinearSystem:
         wide pattern (rings > 1) a node pair outside it raises RuntimeError on every rank
         (collective), never a dropped or misplaced term."""
         plan = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int64)
-        if self.rings == 1:
-            kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
-            return plan
-        miss = _checked_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
+        miss = kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
         comm = self.grid.comm
         if comm.size > 1:                           # collective: every rank raises together
             from mpi4py import MPI
@@ -299,24 +295,6 @@ def _pattern_matrix(grid, nodeptr, adj):
     A = cpp.la.petsc.create_matrix(grid.comm, pattern)
     A.setOption(PETSc.Mat.Option.NEW_NONZERO_ALLOCATION_ERR, True)
     return A
-
-
-@njit(cache=True)
-def _checked_plan(nodes, nodeptr, adj, bs, plan_out):
-    """kernels.transfer.stiffness_plan that reports the first missing pair (flat index
-    p * nv * nv + a * nv + b) instead of writing a wrong offset; -1 when all are present."""
-    nv = nodes.shape[1]
-    for p in range(nodes.shape[0]):
-        for a in range(nv):
-            i = nodes[p, a]
-            lo, hi = nodeptr[i], nodeptr[i + 1]
-            for b in range(nv):
-                j = nodes[p, b]
-                k = np.searchsorted(adj[lo:hi], j)
-                if k >= hi - lo or adj[lo + k] != j:
-                    return (p * nv + a) * nv + b
-                plan_out[p, a, b] = lo * bs * bs + k * bs
-    return -1
 
 
 def _insert_command_line_options(prefix, argv=None):
