@@ -106,7 +106,8 @@ def test_scenes_full_size():
     """Full-size problem sizes as specified (without running them)."""
     full = {s["name"]: s for s in throughput.scenes(quick=False)}
     assert set(full) == {"explicit-MUSL", "explicit-USL", "explicit-USF", "implicit-Newmark",
-                         "implicit-Newmark-mpm", "implicit-Newmark-mpm-lu"}
+                         "implicit-Newmark-mpm", "implicit-Newmark-mpm-lu",
+                         "implicit-QuasiStatic", "implicit-QuasiStatic-mpm"}
     assert full["implicit-Newmark"]["shape"] == "auto"          # the defaults
     for s in full.values():
         cfg = throughput.scene_config(s)

@@ -13,6 +13,8 @@ Runs (full size / --quick):
       KSP GMRES + block Jacobi/ILU)                     / quick: 74^2 cells (2.0e4), 2 steps
   implicit Newmark, standard family (full size only), with the default KSP and with the
       direct LU (the defaults before issue 15)
+  quasi-static (full size only): the same block, gravity ramped over the warm-up and measured
+      steps (each step loads), default KSP (LU), with shape="auto" (cpGIMP) and "mpm"
 The warm-up absorbs numba compilation and first-call set-up; sim.timers are zeroed after it.
 These runs use the process's numba threads (NUMBA_NUM_THREADS; config "threads").
 
@@ -70,6 +72,12 @@ FULL = [
     dict(name="implicit-Newmark-mpm-lu", integrator="Newmark", scheme="Newmark", cells=164,
          per_cell=2, steps=3, warmup=1, dt_factor=5.0,
          petsc_options={"ksp_type": "preonly", "pc_type": "lu"}, prefix="fenicsmpm_bench_lu_"),
+    # quasi-static (default KSP: LU), gravity ramped over the 4 steps: the default shape
+    # (cpGIMP) and the standard family
+    dict(name="implicit-QuasiStatic", integrator="QuasiStatic", scheme="QuasiStatic",
+         cells=164, per_cell=2, steps=3, warmup=1, shape="auto"),
+    dict(name="implicit-QuasiStatic-mpm", integrator="QuasiStatic", scheme="QuasiStatic",
+         cells=164, per_cell=2, steps=3, warmup=1),
 ]
 QUICK = [
     dict(name="explicit-MUSL", integrator="Explicit", scheme="MUSL", cells=164, per_cell=2,
@@ -116,6 +124,9 @@ def scene_config(spec):
                warmup_steps=spec["warmup"])
     if spec["integrator"] == "Explicit":
         cfg.update(dt_rule="auto", cfl=0.5, flip=1.0)
+    elif spec["integrator"] == "QuasiStatic":     # gravity ramped over every step: each loads
+        cfg.update(dt_rule="1 (quasi-static)", load_steps=spec["warmup"] + spec["steps"],
+                   petsc_options=spec.get("petsc_options"), petsc_prefix=spec.get("prefix"))
     else:
         cfg.update(dt_rule=f"{spec['dt_factor']:g} * dt_critical", dt_factor=spec["dt_factor"],
                    beta=0.25, gamma=0.5, petsc_options=spec.get("petsc_options"),
@@ -144,8 +155,11 @@ def build_scene(cfg, comm=None):
         if cfg.get("petsc_options"):
             # own prefix: LinearSystem leaves its options in PETSc's global database
             kw = dict(petsc_options=cfg["petsc_options"], prefix=cfg["petsc_prefix"])
-        integ = fm.Newmark(beta=cfg["beta"], gamma=cfg["gamma"], **kw)
-        dt = cfg["dt_factor"] * grid.h / mat.p_wave_speed      # = dt_factor * sim.dt_critical
+        if cfg["integrator"] == "QuasiStatic":
+            integ, dt = fm.QuasiStatic(load_steps=cfg["load_steps"], **kw), 1.0
+        else:
+            integ = fm.Newmark(beta=cfg["beta"], gamma=cfg["gamma"], **kw)
+            dt = cfg["dt_factor"] * grid.h / mat.p_wave_speed      # = dt_factor * sim.dt_critical
     sim = fm.Simulation(grid, pts, integ, dt=dt, gravity=cfg["gravity"],
                         cfl=cfg.get("cfl", 0.5), shape=cfg.get("shape_family") or "mpm")
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
