@@ -17,8 +17,8 @@ from ..kernels.fbar import fbar_stiffness
 DEFAULT_PREFIX = "fenicsmpm_"
 # the dynamic integrators' default (LinearSystem iterative=True): the mass term keeps
 # J = K + M / (beta dt^2) well conditioned; measured (bench throughput, 1.04e5 particles,
-# dt = 5 dt_crit): 0.51 s/step against 1.42 s with LU (standard family), 0.97 against 5.79 s
-# (cpGIMP); W4 (dx = 0.05 m, dt = 25 dt_crit) with cpGIMP 0.35 against 1.04 s
+# dt = 5 dt_crit): 0.45 s/step against 1.21 s with plain LU (standard family); the default
+# shape (cpGIMP) 0.87 s
 ITERATIVE = {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10, "ksp_max_it": 1000}
 # the direct default (quasi-static runs, and the dynamic ones after a failure of ITERATIVE):
 # LU factors kept from one solve to the next as the preconditioner of right-preconditioned
