@@ -17,27 +17,15 @@ from ..kernels.fbar import fbar_stiffness
 DEFAULT_PREFIX = "fenicsmpm_"
 # the dynamic integrators' default (LinearSystem iterative=True): the mass term keeps
 # J = K + M / (beta dt^2) well conditioned; measured (bench throughput, 1.04e5 particles,
-# dt = 5 dt_crit): 0.45 s/step against 1.21 s with plain LU (standard family); the default
-# shape (cpGIMP) 0.87 s
+# dt = 5 dt_crit, three runs): 0.45-0.62 s/step against 1.21-1.88 s with LU (standard
+# family); the default shape (cpGIMP) 0.87-1.07 s
 ITERATIVE = {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10, "ksp_max_it": 1000}
-# the direct default (quasi-static runs, and the dynamic ones after a failure of ITERATIVE):
-# LU factors kept from one solve to the next as the preconditioner of right-preconditioned
-# GMRES ("lagged" LU; fresh factors solve in one or two iterations). The matrix is factorised
-# again when the GMRES iterations on old factors since the last factorisation exceed
-# REFACTOR_ITS (on the bench throughput scene one factorisation costs about 40-50 of them,
-# standard and cpGIMP alike), or when a solve fails (ksp_max_it); if GMRES fails on fresh
-# factors, their plain solve (preonly) is the answer, as a direct solve always was. Decided
-# by iteration counts, which every rank shares (the factorisation is collective).
-LAGGED = {"ksp_type": "gmres", "pc_type": "lu", "ksp_pc_side": "right", "ksp_rtol": 1e-12,
-          "ksp_max_it": 40}
-REFACTOR_ITS = 40
 
 
-def _direct(comm, plain=False):
-    """The direct default: lagged LU (LAGGED), or with plain=True (the base under options a
-    user set) a plain one; MUMPS on several ranks."""
-    base = {"ksp_type": "preonly", "pc_type": "lu"} if plain else LAGGED
-    return dict(base, **({"pc_factor_mat_solver_type": "mumps"} if comm.size > 1 else {}))
+def _direct(comm):
+    """The direct default: LU (MUMPS on several ranks)."""
+    return dict({"ksp_type": "preonly", "pc_type": "lu"},
+                **({"pc_factor_mat_solver_type": "mumps"} if comm.size > 1 else {}))
 
 
 class LinearSystem:
@@ -56,8 +44,7 @@ class LinearSystem:
 
     Solver options: PETSc options under `prefix` (default "fenicsmpm_"), e.g.
     `-fenicsmpm_ksp_type cg -fenicsmpm_pc_type gamg`, or the `petsc_options` dict. The default
-    is a direct LU (MUMPS on several ranks), its factors reused while they solve in a few
-    GMRES iterations (LAGGED); iterative=True (the dynamic integrators' default,
+    is a direct LU (MUMPS on several ranks); iterative=True (the dynamic integrators' default,
     used only when neither the dict nor the command line sets an option under `prefix`) starts
     with ITERATIVE and switches to that LU for good, logged once, the first time the KSP
     fails, re-solving the same system."""
@@ -99,12 +86,9 @@ class LinearSystem:
         opts = PETSc.Options()
         _insert_command_line_options(prefix)
         self.prefix = prefix
-        default = not petsc_options and not any(k.startswith(prefix) for k in opts.getAll())
-        self.fallback = bool(iterative) and default
-        self.lagged = default and not self.fallback        # LAGGED, managed by solve()
-        self._stale, self._fresh = True, True              # factorise at the next solve
-        merged = (dict(ITERATIVE) if self.fallback else _direct(grid.comm) if self.lagged
-                  else _direct(grid.comm, plain=True))
+        self.fallback = bool(iterative) and not petsc_options and not any(
+            k.startswith(prefix) for k in opts.getAll())
+        merged = dict(ITERATIVE) if self.fallback else _direct(grid.comm)
         merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
         merged.update(petsc_options or {})
         saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
@@ -194,21 +178,14 @@ class LinearSystem:
             self.b.x.array[tie.slave_dofs(self.bs)] = 0.0
             self.ksp.setOperators(tie.reduce(self.A))
         self.b.x.scatter_forward()
-        self.iterations = 0
-        reason = self._solve()
+        self.ksp.solve(self.b.vector, self.x.vector)
+        reason = self.ksp.getConvergedReason()
+        self.iterations = self.ksp.getIterationNumber()
         if reason < 0 and self.fallback:           # the iterative default failed: LU from now on
             self._use_direct(reason)
-            reason = self._solve()
-        if reason < 0 and self.lagged and not self._fresh:     # old factors: factorise anew
-            self._stale = True
-            reason = self._solve()
-        if reason < 0 and self.lagged:             # fresh factors: their plain direct solve
-            self.ksp.setType("preonly")
-            reason = self._solve()
-            self.ksp.setType("gmres")
-        if self.lagged and not self._fresh:
-            self._lag_its += self.iterations
-            self._stale = self._lag_its > REFACTOR_ITS
+            self.ksp.solve(self.b.vector, self.x.vector)
+            reason = self.ksp.getConvergedReason()
+            self.iterations += self.ksp.getIterationNumber()
         if tie is not None:
             tie.expand(self.x.vector.copy(), self.x.vector)
         if reason < 0:
@@ -216,18 +193,6 @@ class LinearSystem:
                                f"({_reason_name(reason)}) after {self.iterations} iterations")
         self.x.x.scatter_forward()
         return self.x.x.array.reshape(R.shape).copy()
-
-    def _solve(self):
-        """One KSP solve of b into x (lagged LU: factorising first when stale); returns the
-        converged reason and adds the iterations."""
-        if self.lagged:
-            self.ksp.getPC().setReusePreconditioner(not self._stale)
-            self._fresh, self._stale = self._stale, False
-            if self._fresh:
-                self._lag_its = 0
-        self.ksp.solve(self.b.vector, self.x.vector)
-        self.iterations += self.ksp.getIterationNumber()
-        return self.ksp.getConvergedReason()
 
     def _use_direct(self, reason):
         """Switch the KSP to the direct default (collective: the converged reason is global)."""
@@ -237,16 +202,12 @@ class LinearSystem:
                 "the iterative linear solver (GMRES + block Jacobi/ILU) failed (%s after %d "
                 "iterations); using the direct LU solver from now on", _reason_name(reason),
                 self.ksp.getIterationNumber())
-        self.ksp.setType("gmres")
+        self.ksp.setType("preonly")
         pc = self.ksp.getPC()
         pc.setType("lu")
         if self.grid.comm.size > 1:
             pc.setFactorSolverType("mumps")
-        self.ksp.setPCSide(PETSc.PC.Side.RIGHT)
-        self.ksp.setNormType(PETSc.KSP.NormType.UNPRECONDITIONED)
-        self.ksp.setTolerances(rtol=LAGGED["ksp_rtol"], max_it=LAGGED["ksp_max_it"])
         self.ksp.setInitialGuessNonzero(False)
-        self.lagged, self._stale = True, True
 
     def destroy(self):
         self.ksp.destroy()

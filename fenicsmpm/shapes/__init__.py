@@ -35,8 +35,8 @@ def choose_shape(sim):
     materials on a lattice get cpGIMP: V3 MMS with Newmark (bench mms) converges at order
     1.77 / 1.86 (displacement / stress) against -0.58 / -0.22 standard, the AMPLE column
     quasi-statically (bench self-weight) 4.36e-4 stress error at 64 cells against 8.3e-2; a
-    Newmark step of the bench throughput block costs 0.87 s against 1.21 s for standard + the
-    plain LU of before, a quasi-static one 8.2 s against 1.5 s (LU fill). Under MPI a mesh
+    Newmark step of the bench throughput block costs 0.87-1.07 s against 1.21-1.88 s for
+    standard + the LU of before, a quasi-static one 12.9-14.5 s against 2.0-2.2 s (LU fill). Under MPI a mesh
     without the vertex ghost layer gets it (Grid.ensure_vertex_ring, called by the
     Simulation). Collective."""
     from .gimp import lattice
