@@ -159,8 +159,18 @@ def test_pair_outside_pattern_raises():
 
 @pytest.mark.skipif(WORLD.size > 1, reason="a stretched box reaches off-rank nodes in parallel "
                                            "(GIMP's own ring error)")
-def test_stretched_cpgimp_raises():
+def test_stretched_cpgimp_widens_the_pattern_or_raises():
+    """A cpGIMP box stretched past the pattern (F_xx = 6: l = 1.5 L, nodes 3+ cells apart)
+    widens it and the step runs; past implicit.MAX_RINGS (F_xx = 12) it raises."""
+    from fenicsmpm.integrators.implicit import MAX_RINGS
     sim = _block("cpgimp", fm.QuasiStatic())
-    sim.particles.F[:, 0, 0] = 6.0           # l = 1.5 L: boxes reach nodes 3+ cells apart
+    assert sim.integrator.system.rings == 2
+    sim.particles.F[:, 0, 0] = 6.0
+    sim.step()
+    assert sim.integrator.system.rings > 2
+    assert np.all(np.isfinite(sim.particles.stress))
+    sim = _block("cpgimp", fm.QuasiStatic())
+    sim.particles.F[:, 0, 0] = 12.0          # l = 3 L: nodes 7 cells apart
     with pytest.raises(RuntimeError, match="outside the static matrix pattern"):
         sim.step()
+    assert sim.integrator.system.rings == MAX_RINGS

@@ -11,11 +11,12 @@ from fenicsmpm.grid import vertex_ghost_partitioner
 comm = MPI.COMM_WORLD
 
 
-def _sim(cell_type, integrator, ring=True, material=None, **kw):
+def _sim(cell_type, integrator, ring=True, material=None, per_cell=2, **kw):
     opts = dict(partitioner=vertex_ghost_partitioner()) if ring else {}
     msh = mesh.create_rectangle(comm, [[0, 0], [1, 1]], [8, 8], cell_type, **opts)
     grid = fm.Grid(msh)
-    p = fm.Particles.fill(grid, material or fm.LinearElastic(E=1e6, nu=0.3, density=1e3))
+    p = fm.Particles.fill(grid, material or fm.LinearElastic(E=1e6, nu=0.3, density=1e3),
+                          per_cell=per_cell)
     kw.setdefault("shape", "auto")
     return fm.Simulation(grid, p, integrator, dt=1e-4, **kw)
 
@@ -31,6 +32,9 @@ def test_auto_picks_the_wide_family_of_the_mesh(cell_type, family):
 
 def test_auto_falls_back_with_a_reason():
     assert _sim(mesh.CellType.quadrilateral, fm.Newmark()).shape == "cpgimp"     # elastic
+    one = _sim(mesh.CellType.quadrilateral, fm.Newmark(), per_cell=1)
+    assert one.shape == "mpm" and "particles per cell" in one.shape_reason, one.shape_reason
+    assert _sim(mesh.CellType.quadrilateral, fm.Explicit(), per_cell=1).shape == "cpgimp"
     assert _sim(mesh.CellType.triangle, fm.Newmark()).shape_reason.startswith("implicit")
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), force_integration="mixed")
     assert sim.shape == "mpm" and "mixed" in sim.shape_reason

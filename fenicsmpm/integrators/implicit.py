@@ -24,6 +24,7 @@ step). Measured (`tests/test_line_search.py`): the Prandtl footing of a smooth r
 von Mises soil (h = 0.1 m, 1 mm steps, no step cuts) diverges at step 27 with the full step and
 runs to the end with line_search=6; in the softening shear layer of test_regularisation it
 raises the worst step's Newton iterations from 5 to 9, hence not the default."""
+import logging
 import time
 
 import numpy as np
@@ -32,7 +33,9 @@ from ..kernels import axisymmetric as axi
 from ..boundaries import particle_layer as kl
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
-from .linear_system import DEFAULT_PREFIX, LinearSystem, stencil_rings
+from .linear_system import DEFAULT_PREFIX, LinearSystem, OutsidePattern, stencil_rings
+
+MAX_RINGS = 4           # the widest implicit pattern _Newton._plan grows to (cell rings)
 
 
 class _Newton:
@@ -71,6 +74,26 @@ class _Newton:
         self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
                                    rings=stencil_rings(sim), shape=shape,
                                    iterative=self.iterative_default)
+
+    def _plan(self, sim):
+        """(scatter plan, system) for this step. A wide family's particle domain that has
+        grown past the static pattern (a stretched cpGIMP box) widens it by a cell ring
+        (collective; logged on rank 0), up to MAX_RINGS, instead of stopping the run."""
+        while True:
+            try:
+                return self.system.plan(sim.nodes), self.system
+            except OutsidePattern:
+                old = self.system
+                if old.rings >= MAX_RINGS or getattr(self, "double_mapping", False):
+                    raise
+                self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
+                                           rings=old.rings + 1, shape=old.shape,
+                                           iterative=self.iterative_default)
+                old.destroy()
+                if sim.comm.rank == 0:
+                    logging.getLogger("fenicsmpm").info(
+                        "step %d: a particle domain grew past the implicit matrix pattern; "
+                        "widened to %d cell rings", sim.step_count, self.system.rings)
 
     def strain_increment(self, sim, du):
         """sim._dF <- I + sum_i du_i (x) grad N_ip (the step's incremental deformation gradient);
@@ -130,7 +153,7 @@ class _Newton:
         if sim.comm.size > 1:
             moving = sim.comm.allreduce(moving)
         t0 = time.perf_counter()
-        plan = sys.plan(sim.nodes)
+        plan, sys = self._plan(sim)
         T["assembly"] += time.perf_counter() - t0
         P = np.empty((n, 3, 3))
         dsig = np.empty((n, 3, 3, 3, 3))

@@ -28,6 +28,11 @@ def _direct(comm):
                 **({"pc_factor_mat_solver_type": "mumps"} if comm.size > 1 else {}))
 
 
+class OutsidePattern(RuntimeError):
+    """LinearSystem.plan: a particle couples a node pair outside the static matrix pattern
+    (raised on every rank together); the implicit integrators widen the pattern and retry."""
+
+
 class LinearSystem:
     """K du = R on the vector P1/Q1 space of `grid`.
 
@@ -116,13 +121,13 @@ class LinearSystem:
         if comm.size > 1:                           # collective: every rank raises together
             from mpi4py import MPI
             if comm.allreduce(int(miss >= 0), op=MPI.MAX) and miss < 0:
-                raise RuntimeError(f"implicit shape={self.shape!r}: a particle on another rank "
+                raise OutsidePattern(f"implicit shape={self.shape!r}: a particle on another rank "
                                    f"couples nodes outside the static matrix pattern (see its "
                                    f"message)")
         if miss >= 0:
             p, a, b = miss // nodes.shape[1] ** 2, miss // nodes.shape[1] % nodes.shape[1], miss % nodes.shape[1]
             xi, xj = self.grid.node_x[nodes[p, a]], self.grid.node_x[nodes[p, b]]
-            raise RuntimeError(
+            raise OutsidePattern(
                 f"implicit shape={self.shape!r}: local particle {p} couples the nodes at "
                 f"{np.round(xi, 6).tolist()} and {np.round(xj, 6).tolist()}, which are more "
                 f"than {self.rings} cell rings apart: outside the static matrix pattern "
