@@ -53,26 +53,31 @@ def _load_average():
 
 
 def machine_info(comm):
-    """Cores, MPI ranks, CPU model, library versions and a UTC timestamp (no hostname)."""
+    """Cores, MPI ranks, CPU model, library versions and a UTC timestamp (no hostname), as
+    rank 0 sees them (collective: every rank's document then equals the JSON rank 0 writes,
+    also when the ranks' clocks or load averages tick between their calls)."""
     import dolfinx
     import numba
     from petsc4py import PETSc
-    return {
-        "cores": os.cpu_count(),
-        "ranks": comm.size,
-        "cpu": _cpu_model(),
-        "platform": f"{platform.system()} {platform.release()} {platform.machine()}",
-        "versions": {
-            "dolfinx": dolfinx.__version__,
-            "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()),
-            "numba": numba.__version__,
-            "numpy": np.__version__,
-            "python": platform.python_version(),
-        },
-        "timestamp": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
-        # other load on the machine when the case started (timings are wall-clock)
-        "load_average_1min": _load_average(),
-    }
+    info = None
+    if comm.rank == 0:
+        info = {
+            "cores": os.cpu_count(),
+            "ranks": comm.size,
+            "cpu": _cpu_model(),
+            "platform": f"{platform.system()} {platform.release()} {platform.machine()}",
+            "versions": {
+                "dolfinx": dolfinx.__version__,
+                "petsc": ".".join(str(v) for v in PETSc.Sys.getVersion()),
+                "numba": numba.__version__,
+                "numpy": np.__version__,
+                "python": platform.python_version(),
+            },
+            "timestamp": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+            # other load on the machine when the case started (timings are wall-clock)
+            "load_average_1min": _load_average(),
+        }
+    return comm.bcast(info, root=0) if comm.size > 1 else info
 
 
 def machine_title(machine):
