@@ -56,7 +56,7 @@ def choose_shape(sim):
                        f"0.53-0.58 standard, infinite slope 0.49)")
     try:
         lat = lattice(grid)
-        if implicit and _coarse_fill(sim, lat["spacing"]):
+        if implicit and _coarse_fill(sim, lat):
             return "mpm", ("implicit integrator with fewer than 2 particles per cell and "
                            "direction (cpGIMP measured implicitly with 2 x 2 per cell)")
         return "cpgimp", "structured axis-aligned grid" + (
@@ -75,17 +75,19 @@ def choose_shape(sim):
     return "cpdi1", "3D mesh that is not a structured lattice"
 
 
-def _coarse_fill(sim, spacing):
-    """True when some particle's initial domain, V^(1/d), is wider than half a lattice cell:
-    fewer than 2 particles per cell and direction (collective). With one per cell an implicit
-    cpGIMP box spans its cell, any stretch reaches past the 2-ring pattern, and Newton failed
-    on cases of tests/stress/test_fuzz.py that the standard family runs."""
-    p, d = sim.particles, sim.gdim
-    w = float(np.max(p.V) ** (1.0 / d)) if len(p) else 0.0
+def _coarse_fill(sim, lat):
+    """True when some particle's initial box (gimp.initial_half_widths: the fill spacing, the
+    meridian area on axisymmetric grids) is wider than half a lattice cell: fewer than 2
+    particles per cell and direction (collective). With one per cell an implicit cpGIMP box
+    spans its cell, any stretch reaches past the 2-ring pattern, and Newton failed on cases of
+    tests/stress/test_fuzz.py that the standard family runs."""
+    from .gimp import initial_half_widths
+    p = sim.particles
+    r = float(np.max(initial_half_widths(sim.grid, p, lat) / lat["spacing"])) if len(p) else 0.0
     if sim.comm.size > 1:
         from mpi4py import MPI
-        w = sim.comm.allreduce(w, op=MPI.MAX)
-    return w > 0.5 * float(np.min(spacing)) * (1.0 + 1e-6)
+        r = sim.comm.allreduce(r, op=MPI.MAX)
+    return r > 0.25 * (1.0 + 1e-6)
 
 
 def resolve_shape(sim, shape):
