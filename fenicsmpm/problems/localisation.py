@@ -129,7 +129,7 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     a smooth rigid footing (the top nodes with x <= B/2 moved down, u_x free: displacement
     control), bottom fixed, rollers on both sides.  Weightless, so Prandtl's (2 + pi) c_u =
     51.4 kPa is the limit pressure of the soil without softening.  Returns the
-    pressure-settlement curve (p = vertical reaction / (B/2)), the final eps_p field, the band
+    pressure-settlement curve (p = vertical reaction / (B/2)), the largest eps_p, the band
     width w = sum_p V_p eps_p / (eps_p,max L), L = prandtl_band_length(B/2), Newton
     iterations, completed/stop message and the time split (step wall, nonlocal).  A step
     whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts).
@@ -172,11 +172,8 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     emax = _gmax(comm, float(eps.max()) if len(p) else 0.0)
     band = (_gsum(comm, float(np.sum(p.V * eps))) / (emax * prandtl_band_length(half_width))
             if emax > 0 else 0.0)
-    parts = comm.gather((p.x.copy(), eps.copy()), root=0)
     return dict(h=h, length=length, settlement=np.array(s), pressure=np.array(pr),
                 completed=done, stopped=msg, band_width=band, eps_max=emax,
-                x=np.concatenate([a for a, _ in parts]) if comm.rank == 0 else None,
-                eps=np.concatenate([b for _, b in parts]) if comm.rank == 0 else None,
                 newton=list(qs.iterations), wall_s=wall,
                 nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
                 n_particles=_gsum(comm, len(p)))
