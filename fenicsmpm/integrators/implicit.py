@@ -71,9 +71,12 @@ class _Newton:
         if sim.fbar and sim.axisymmetric:          # particle layers: SetupMixin.add_boundary
             raise NotImplementedError(f"{type(self).__name__}: fbar=True needs a plane or 3D "
                                       f"grid (got an axisymmetric grid)")
-        self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
-                                   rings=stencil_rings(sim), shape=shape,
-                                   iterative=self.iterative_default)
+        self.system = self._system(sim, stencil_rings(sim), shape)
+
+    def _system(self, sim, rings, shape):
+        """The LinearSystem of this integrator's options with a pattern of `rings` cell rings."""
+        return LinearSystem(sim.grid, self.petsc_options, self.prefix, rings=rings, shape=shape,
+                            iterative=self.iterative_default)
 
     def _plan(self, sim):
         """(scatter plan, system) for this step. A wide family's particle domain that has
@@ -86,9 +89,7 @@ class _Newton:
                 old = self.system
                 if old.rings >= MAX_RINGS or getattr(self, "double_mapping", False):
                     raise
-                self.system = LinearSystem(sim.grid, self.petsc_options, self.prefix,
-                                           rings=old.rings + 1, shape=old.shape,
-                                           iterative=self.iterative_default)
+                self.system = self._system(sim, old.rings + 1, old.shape)
                 old.destroy()
                 if sim.comm.rank == 0:
                     logging.getLogger("fenicsmpm").info(

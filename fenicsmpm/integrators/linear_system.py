@@ -113,17 +113,17 @@ class LinearSystem:
 
     def plan(self, nodes):
         """Scatter plan of the current particle-node connectivity (once per step). With the
-        wide pattern (rings > 1) a node pair outside it raises RuntimeError on every rank
-        (collective), never a dropped or misplaced term."""
+        wide pattern (rings > 1) a node pair outside it raises OutsidePattern (a RuntimeError)
+        on every rank (collective), never a dropped or misplaced term."""
         plan = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int64)
         miss = kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
         comm = self.grid.comm
         if comm.size > 1:                           # collective: every rank raises together
             from mpi4py import MPI
             if comm.allreduce(int(miss >= 0), op=MPI.MAX) and miss < 0:
-                raise OutsidePattern(f"implicit shape={self.shape!r}: a particle on another rank "
-                                   f"couples nodes outside the static matrix pattern (see its "
-                                   f"message)")
+                raise OutsidePattern(f"implicit shape={self.shape!r}: a particle on another "
+                                     f"rank couples nodes outside the static matrix pattern "
+                                     f"(see its message)")
         if miss >= 0:
             p, a, b = miss // nodes.shape[1] ** 2, miss // nodes.shape[1] % nodes.shape[1], miss % nodes.shape[1]
             xi, xj = self.grid.node_x[nodes[p, a]], self.grid.node_x[nodes[p, b]]
