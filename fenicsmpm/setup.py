@@ -18,6 +18,20 @@ from .splitting import Splitting
 
 FORCE_INTEGRATIONS = ("particles", "mixed")
 LEAVE_POLICIES = ("error", "remove", "periodic")
+# why shape="auto" falls back to the standard family for an explicit run with a particle layer
+# (python -m fenicsmpm.bench absorbing: W3 rows; implicit runs keep the wide family: W3 Newmark
+# reflection 3.4 % / 1.8 % with cpGIMP at dx = 0.25 / 0.125 m against 0.8 % / 3.1 % standard)
+LAYER_EXPLICIT = ("explicit run with a particle-layer boundary: a wide family's layer particles "
+                  "reach into the empty cells beyond the material, whose small nodal masses make "
+                  "the explicit step unstable (W3 reflection 21 % with cpGIMP at dx = 0.25 m, "
+                  "1 % standard)")
+# the default mass_tolerance of an implicit wide-family run with a particle layer: the layer
+# particles' domains reach the empty cells beyond the material with masses down to round-off,
+# and those nodes reflect. W1 column, layer 2 m above the mesh's base, Newmark dt 0.005 s
+# (tests/test_particle_layer.py): reflection 5.4 % with cpGIMP at 1e-12, 1.28 % at 1e-4 (1.28 %
+# standard); W4 (demos/point_load_2d.py, dx = 0.05 m, viscous far field): energy balance
+# -0.62 % of the largest work of the load at t = 1 s (-5.6 % standard)
+LAYER_MASS_TOLERANCE = 1e-4
 
 
 def _check_ramp(T, owner):
@@ -115,6 +129,8 @@ class SetupMixin:
                 raise NotImplementedError("start_stage: frictional boundaries need fm.Explicit, "
                                           f"not {type(integrator).__name__}")
             self.integrator = integrator
+            if integrator.explicit and self.layers:
+                self._use_standard_shape(LAYER_EXPLICIT)
             integrator.setup(self)
             self._robin = None                    # recompile for the new integrator
         if dt is not None or integrator is not None:
@@ -196,8 +212,15 @@ class SetupMixin:
             if self.axisymmetric:
                 raise NotImplementedError("add_boundary: particle-layer boundaries are not "
                                           "implemented on axisymmetric grids; use a mesh boundary")
-            self._use_standard_shape("particle-layer boundaries absorb best with the standard "
-                                     "family (W3 reflection 8 % with cpGIMP)")
+            if self.integrator.explicit:
+                self._use_standard_shape(LAYER_EXPLICIT)
+            elif self.shape != "mpm" and self._mass_tolerance_default \
+                    and self.mass_tolerance < LAYER_MASS_TOLERANCE:
+                self.mass_tolerance = LAYER_MASS_TOLERANCE
+                if self.comm.rank == 0:
+                    logging.getLogger("fenicsmpm").info(
+                        "particle layer with shape=%r: mass_tolerance = %g", self.shape,
+                        LAYER_MASS_TOLERANCE)
             if self.fbar and not self.integrator.explicit:
                 if not self.fbar_auto or self.step_count:
                     raise NotImplementedError("add_boundary: implicit F-bar (fbar=True) does not "

@@ -39,8 +39,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     gravity: body acceleration vector (length gdim), default zero.
     mass_tolerance: nodes with mass below this fraction of the largest nodal mass are
     inactive (no velocity, no division by a vanishing mass; constrained in implicit solves).
-    Default 1e-12: the quadratic tails of GIMP weights put masses of 1e-10 on nodes that
-    carry forces, and 1e-9 lost momentum at that level (tests/test_traction.py).
+    Default (None) 1e-12: the quadratic tails of GIMP weights put masses of 1e-10 on nodes that
+    carry forces, and 1e-9 lost momentum at that level (tests/test_traction.py); 1e-4 for an
+    implicit run of a wide family with a particle layer (add_boundary; LAYER_MASS_TOLERANCE).
     on_leave: what happens to particles that leave the mesh: "error" (stop with their ids and
     positions) or "remove" (drop them; the removed mass is counted in `removed_mass`, and
     reported as a warning) or "periodic" (re-enter through the opposite periodic face, see
@@ -79,7 +80,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     radial displacement of nodes on the axis r = 0 is fixed."""
 
     def __init__(self, grid, particles, integrator, dt, gravity=None, cfl=0.5,
-                 mass_tolerance=1e-12, on_leave="error", max_dt_cuts=0, shape="auto", fbar="auto",
+                 mass_tolerance=None, on_leave="error", max_dt_cuts=0, shape="auto", fbar="auto",
                  stress_feedback=None, gravity_ramp=None, force_integration="particles"):
         self.grid = grid
         self.particles = particles
@@ -99,6 +100,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.cfl = cfl
         self._wave_materials = self._deformable_materials()
         self.dt = self._check_dt(dt)
+        self._mass_tolerance_default = mass_tolerance is None
+        mass_tolerance = 1e-12 if mass_tolerance is None else mass_tolerance
         if not (isinstance(mass_tolerance, (int, float, np.floating)) and 0 < mass_tolerance < 1):
             raise ValueError(f"Simulation: 'mass_tolerance' must be a number in (0, 1), got {mass_tolerance!r}")
         self.mass_tolerance = float(mass_tolerance)

@@ -355,7 +355,7 @@ def g2p(D, nodes, N, du, v_old, v_new, flip, x, v, u):
 
 
 @njit(cache=True)
-def _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, lo, hi):
+def _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo, hi):
     d = len(D)
     B = np.zeros((d, d))
     Dm = np.zeros((d, d))
@@ -390,30 +390,35 @@ def _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, lo, hi):
                     C[p, k, l] = c
         for k in range(d):
             dx = 0.0
+            dv = 0.0
             vp = 0.0
             for a in range(nodes.shape[1]):
                 i = nodes[p, a]
                 dx += N[p, a] * du[i, k]
+                dv += N[p, a] * (v_new[i, k] - v_old[i, k])
                 vp += N[p, a] * v_new[i, k]
             x[p, k] += dx
             u[p, k] += dx
-            v[p, k] = vp
+            v[p, k] = flip * (v[p, k] + dv) + (1.0 - flip) * vp
 
 
 @njit(parallel=PRANGE, cache=True)
-def g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C):
-    """APIC particle update (Jiang et al. 2015, eqs 8-9): v_p = sum N v_i (PIC) and
+def g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C):
+    """Affine particle update. C_p as in APIC (Jiang et al. 2015, eqs 8-9),
         C_p = B_p D_p^-1,  B_p = sum_i N_ip v_i (x_i - x_p)^T,  D_p = sum_i N_ip (x_i - x_p)(x_i - x_p)^T,
-    with x_p the start-of-step position (angular momentum is conserved exactly); where D_p is
-    singular (a particle on a node of a multilinear cell) C_p = sum v_i (x) grad N_ip.
-    Then x_p += sum N du_i."""
+    with v_i = v_new and x_p the start-of-step position; where D_p is singular (a particle on a
+    node of a multilinear cell) C_p = sum v_i (x) grad N_ip. The velocity
+        v_p = flip (v_p + sum N (v_new - v_old)_i) + (1 - flip) sum N v_new_i:
+    flip = 0 is APIC (angular momentum conserved exactly), flip > 0 the affine FLIP of Fei et
+    al. 2021 (AFLIP: FLIP's velocity increment with APIC's C_p). Then x_p += sum N du_i."""
     n = nodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, np.int64(0), n)
+        return _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C,
+                           np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        _g2p_affine(D, nodes, N, dN, node_x, du, v_new, x, v, u, C, lo, hi)
+        _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo, hi)
 
 
 @njit(cache=True)
