@@ -43,10 +43,33 @@ def _reference_points(cell_type, n):
         down = [((i + 2 / 3) / n, (j + 2 / 3) / n) for i in range(n) for j in range(n - 1 - i)]
         pts = np.array(up + down)
         return pts, np.full(len(pts), 0.5 / n ** 2)
-    import basix
-    pts, wts = basix.make_quadrature(basix.QuadratureType.gauss_jacobi, basix.CellType.tetrahedron,
-                                     2 * n - 1)
-    return pts, wts
+    verts = tet_subdivision(n)
+    return verts.mean(axis=1), np.full(len(verts), 1.0 / (6 * n ** 3))
+
+
+def tet_subdivision(n):
+    """The n^3 sub-tetrahedra of equal volume that tile the reference tetrahedron (the
+    edgewise subdivision: the Kuhn tetrahedra of the unit cubes inside the n-scaled Kuhn
+    simplex 0 <= c <= b <= a <= n, mapped affinely onto the reference tetrahedron), as their
+    reference vertices (n^3, 4, 3). Particles.fill puts one particle at each centroid; CPDI
+    uses the sub-tetrahedra as the particles' domains (shapes.cpdi.initial_tets), so they tile
+    the cell."""
+    import itertools
+    kuhn = []
+    for c in itertools.product(range(n), repeat=3):
+        for perm in itertools.permutations(range(3)):
+            v = [np.array(c, dtype=float)]
+            for ax in perm:
+                v.append(v[-1] + np.eye(3)[ax])
+            v = np.array(v)
+            if np.all((v[:, 0] >= v[:, 1]) & (v[:, 1] >= v[:, 2]) & (v[:, 2] >= 0)
+                      & (v[:, 0] <= n)):
+                kuhn.append(v)
+    kuhn = np.array(kuhn) / n                         # in the Kuhn simplex a >= b >= c
+    # Kuhn simplex (0,0,0), (1,0,0), (1,1,0), (1,1,1) -> reference (0,0,0), e1, e2, e3:
+    # xi = (a - b, b - c, c)
+    a, b, c = kuhn[..., 0], kuhn[..., 1], kuhn[..., 2]
+    return np.stack([a - b, b - c, c], axis=-1)
 
 
 class Particles:
@@ -103,7 +126,8 @@ class Particles:
     # ------------------------------------------------------------------ creation
     @classmethod
     def fill(cls, grid, material, per_cell=2, region=None, velocity=None):
-        """Fill every owned cell with per_cell points per direction.
+        """Fill every owned cell with per_cell points per direction (triangles: per_cell^2 at
+        sub-triangle centroids; tetrahedra: per_cell^3 at the centroids of tet_subdivision).
 
         region(x) -> bool (x of shape (n, gdim)) keeps a subset; velocity is a constant
         vector or a callable velocity(x) -> (n, gdim)."""

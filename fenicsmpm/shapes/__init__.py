@@ -18,12 +18,12 @@ def choose_shape(sim):
     The most accurate family the mesh supports, by measurement (bench techniques, mms,
     column-peers; issue 15): cpGIMP on structured axis-aligned quadrilateral/hexahedral
     grids, CPDI2 on other 2D meshes (triangles, unstructured quadrilaterals), CPDI1 on other
-    3D meshes (tetrahedra: tetrahedral domains, the cells themselves with one particle per
-    cell; hexahedra: parallelepipeds). 3D soft column on tetrahedra (BENCHMARKS L1 soft case,
-    `PYTHONPATH=. python tests/test_cpdi3d.py`), max |sigma_zz + rho g d| / (rho g H) with one particle per cell:
-    CPDI1 2.8 % / 1.4 % against standard MPM 73 % / 92 % at 10 / 20 cells over H; with the
-    8 Gauss-Jacobi particles of Particles.fill(per_cell=2) the shrunk cells overlap and CPDI1
-    gives 49 % / 85 % against 102 % / 96 % (rms 7.1 % / 11 % against 9.7 % / 15 %). The standard
+    3D meshes (tetrahedra: tetrahedral domains, the sub-tetrahedra of Particles.fill that tile
+    the cells; hexahedra: parallelepipeds). 3D soft column on tetrahedra (BENCHMARKS L1 soft
+    case, `PYTHONPATH=. python tests/test_cpdi3d.py`), max |sigma_zz + rho g d| / (rho g H)
+    at 10 / 20 cells over H: one particle per cell, CPDI1 2.8 % / 1.4 % against standard MPM
+    73 % / 92 %; the default 2 per cell (8 sub-tetrahedra), CPDI1 3.5 % / 1.8 % (rms 1.5 % /
+    0.6 %) against 116 % / 133 % (rms 12.5 % / 15.8 %). The standard
     family where a wide one is not available or measured worse: implicit integrators with a
     plastic material or on meshes that are not lattices, force_integration="mixed",
     plastic materials other than VonMises (`plastic` set: MohrCoulomb, Hypoplastic; with cpGIMP the L4

@@ -322,17 +322,35 @@ def tet_weights(corners, w_out, g_out):
 
 
 def initial_tets(grid, particles):
-    """Initial tetrahedral domains (n, 4, 3) as offsets from x_p: the particle's cell shrunk
-    about its centroid to volume V0_p, r_c^0 = (V0_p / V_cell)^(1/3) (X_c - X_centroid),
-    vertices 1 and 2 swapped where the cell is negatively oriented. With one particle per
-    cell (Particles.fill(per_cell=1)) the domains are the cells: they tile the body."""
-    X = grid.node_x[grid.cell_nodes[particles.cell]]           # (n, 4, 3)
+    """Initial tetrahedral domains (n, 4, 3) as offsets from x_p, vertices 1 and 2 swapped
+    where a domain is negatively oriented. A particle of Particles.fill(per_cell=k) (volume
+    V_cell / k^3, at the centroid of sub-tetrahedron j of particles.tet_subdivision(k) in its
+    cell) gets that sub-tetrahedron: the domains tile the body (with k = 1 they are the
+    cells). Any other particle gets its cell shrunk about its centroid to volume V0_p,
+    r_c^0 = (V0_p / V_cell)^(1/3) (X_c - X_centroid)."""
+    from ..particles import tet_subdivision
+    p = particles
+    X = grid.node_x[grid.cell_nodes[p.cell]]                   # (n, 4, 3)
     e = X[:, 1:] - X[:, :1]
     det = np.linalg.det(e) if len(X) else np.zeros(0)
-    flip = det < 0
-    X[flip, 1], X[flip, 2] = X[flip, 2].copy(), X[flip, 1].copy()
-    s = np.cbrt(particles.V0 / (np.abs(det) / 6.0))
-    return (X - X.mean(axis=1, keepdims=True)) * s[:, None, None]
+    s = np.cbrt(p.V0 / (np.abs(det) / 6.0))
+    out = (X - X.mean(axis=1, keepdims=True)) * s[:, None, None]
+    k = np.rint(1.0 / s).astype(int) if len(X) else np.zeros(0, int)
+    for kk in np.unique(k[(k > 1) & (np.abs(k * s - 1.0) < 1e-8)]):
+        sub = tet_subdivision(int(kk))                         # (kk^3, 4, 3) reference
+        cen = sub.mean(axis=1)
+        sel = np.flatnonzero((k == kk) & (np.abs(kk * s - 1.0) < 1e-8))
+        dist = np.linalg.norm(p.xi[sel, None, :] - cen[None], axis=2)
+        j = np.argmin(dist, axis=1)
+        hit = dist[np.arange(len(sel)), j] < 1e-8
+        sel, j = sel[hit], j[hit]
+        # x = X_0 + e^T xi for the affine cell map
+        Xs = X[sel, :1] + np.einsum("pcr,prk->pck", sub[j], e[sel])
+        out[sel] = Xs - Xs.mean(axis=1, keepdims=True)
+    ed = out[:, 1:] - out[:, :1]
+    flip = (np.linalg.det(ed) < 0) if len(X) else np.zeros(0, bool)
+    out[flip, 1], out[flip, 2] = out[flip, 2].copy(), out[flip, 1].copy()
+    return out
 
 
 @njit(cache=True)
