@@ -37,23 +37,29 @@ def _reference_points(cell_type, n):
         t = (np.arange(n) + 0.5) / n
         pts = np.stack(np.meshgrid(*([t] * d), indexing="ij"), axis=-1).reshape(-1, d)
         return pts, np.full(len(pts), 1.0 / n ** d)
-    if cell_type == CellType.triangle:
-        # centroids of the n^2 congruent sub-triangles
-        up = [((i + 1 / 3) / n, (j + 1 / 3) / n) for i in range(n) for j in range(n - i)]
-        down = [((i + 2 / 3) / n, (j + 2 / 3) / n) for i in range(n) for j in range(n - 1 - i)]
-        pts = np.array(up + down)
-        return pts, np.full(len(pts), 0.5 / n ** 2)
-    verts = tet_subdivision(n)
-    return verts.mean(axis=1), np.full(len(verts), 1.0 / (6 * n ** 3))
+    d = 2 if cell_type == CellType.triangle else 3
+    verts = simplex_subdivision(d, n)
+    return verts.mean(axis=1), np.full(len(verts), (0.5 if d == 2 else 1.0 / 6.0) / n ** d)
+
+
+def simplex_subdivision(d, n):
+    """The n^d sub-simplices of equal measure that tile the reference triangle (d = 2) or
+    tetrahedron (d = 3), as their reference vertices (n^d, d + 1, d). Particles.fill puts one
+    particle at each centroid; CPDI uses the sub-simplices as the particles' domains
+    (shapes.cpdi.initial_simplices), so they tile the cell. Triangles: the n^2 congruent
+    sub-triangles, the upright ones first; tetrahedra: tet_subdivision."""
+    if d == 3:
+        return tet_subdivision(n)
+    up = [[(i, j), (i + 1, j), (i, j + 1)] for i in range(n) for j in range(n - i)]
+    down = [[(i + 1, j + 1), (i, j + 1), (i + 1, j)] for i in range(n) for j in range(n - 1 - i)]
+    return np.array(up + down, dtype=float) / n
 
 
 def tet_subdivision(n):
     """The n^3 sub-tetrahedra of equal volume that tile the reference tetrahedron (the
     edgewise subdivision: the Kuhn tetrahedra of the unit cubes inside the n-scaled Kuhn
     simplex 0 <= c <= b <= a <= n, mapped affinely onto the reference tetrahedron), as their
-    reference vertices (n^3, 4, 3). Particles.fill puts one particle at each centroid; CPDI
-    uses the sub-tetrahedra as the particles' domains (shapes.cpdi.initial_tets), so they tile
-    the cell."""
+    reference vertices (n^3, 4, 3)."""
     import itertools
     kuhn = []
     for c in itertools.product(range(n), repeat=3):
@@ -126,8 +132,8 @@ class Particles:
     # ------------------------------------------------------------------ creation
     @classmethod
     def fill(cls, grid, material, per_cell=2, region=None, velocity=None):
-        """Fill every owned cell with per_cell points per direction (triangles: per_cell^2 at
-        sub-triangle centroids; tetrahedra: per_cell^3 at the centroids of tet_subdivision).
+        """Fill every owned cell with per_cell points per direction (triangles and tetrahedra:
+        per_cell^d at the centroids of the equal sub-simplices of simplex_subdivision).
 
         region(x) -> bool (x of shape (n, gdim)) keeps a subset; velocity is a constant
         vector or a callable velocity(x) -> (n, gdim)."""

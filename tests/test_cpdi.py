@@ -58,22 +58,26 @@ def test_partition_of_unity_and_affine(cell_type, shape, distorted, rng):
     grid, pts, sim = make(cell_type, shape, distorted)
     n = len(pts)
     side = np.sqrt(pts.V0)[:, None]
+    nc = 3 if cell_type == CT.triangle else 4        # triangular domains on triangle meshes
     # move each particle by up to 0.2 of its domain; keep every corner inside the mesh
     pts.x[:] = pts.x + rng.uniform(-0.2, 0.2, (n, 2)) * side
     if shape == "cpdi1":
         pts.F[:, :2, :2] = np.eye(2) + rng.uniform(-0.15, 0.15, (n, 2, 2))
-        corners = np.empty((n, 4, 2))
-        kc.cpdi1_corners(pts.x, pts.F, pts.cpdi_r0, corners)
+        corners = np.empty((n, nc, 2))
+        if nc == 3:
+            kc.simplex_corners(pts.x, pts.F, pts.cpdi_t0, corners)
+        else:
+            kc.cpdi1_corners(pts.x, pts.F, pts.cpdi_r0, corners)
         centroid = pts.x
     else:
-        pts.cpdi_corners[:] += rng.uniform(-0.1, 0.1, (n, 4, 2)) * side[:, :, None]
+        pts.cpdi_corners[:] += rng.uniform(-0.1, 0.1, (n, nc, 2)) * side[:, :, None]
         corners = pts.cpdi_corners
     inside = np.all((corners > 1e-9) & (corners < np.array([1.5, 1.0]) - 1e-9), axis=(1, 2))
     sim.locate_and_shape()
-    w = np.empty((n, 4))
-    gc = np.empty((n, 4, 2))
-    kc.corner_weights(np.ascontiguousarray(corners), w, gc)
-    if shape == "cpdi2":      # centroid of the bilinear quadrilateral: int x dx / V
+    w = np.empty((n, nc))
+    gc = np.empty((n, nc, 2))
+    (kc.tri_weights if nc == 3 else kc.corner_weights)(np.ascontiguousarray(corners), w, gc)
+    if shape == "cpdi2":      # centroid of the domain: int x dx / V
         centroid = np.einsum("pc,pck->pk", w, corners) / w.sum(axis=1)[:, None]
     A = rng.normal(size=(2, 2))
     b = rng.normal(size=2)
@@ -125,16 +129,16 @@ def test_rigid_rotation_keeps_volume(shape):
     c, s = np.cos(np.radians(37.0)), np.sin(np.radians(37.0))
     R = np.array([[c, -s], [s, c]])
     n = len(pts)
-    if shape == "cpdi1":
+    if shape == "cpdi1":                       # triangular domains (the sub-triangles)
         pts.F[:, :2, :2] = R
-        corners = np.empty((n, 4, 2))
-        kc.cpdi1_corners(pts.x, pts.F, pts.cpdi_r0, corners)
+        corners = np.empty((n, 3, 2))
+        kc.simplex_corners(pts.x, pts.F, pts.cpdi_t0, corners)
     else:
         rel = pts.cpdi_corners - pts.x[:, None, :]
         pts.cpdi_corners[:] = pts.x[:, None, :] + rel @ R.T
         corners = pts.cpdi_corners
-    w = np.empty((n, 4))
-    kc.corner_weights(np.ascontiguousarray(corners), w, np.empty((n, 4, 2)))
+    w = np.empty((n, 3))
+    kc.tri_weights(np.ascontiguousarray(corners), w, np.empty((n, 3, 2)))
     err = MPI.COMM_WORLD.allreduce(float(np.abs(w.sum(axis=1) / pts.V0 - 1).max()), op=MPI.MAX)
     assert err < 1e-12, f"{shape}: rotated domain area / V0 - 1 = {err:.2e} (tol 1e-12)"
 

@@ -14,6 +14,7 @@ explicit MUSL at dt = 0.2 h / c_p, run to the displacement peak t_end = 1 / (2 c
 """
 import numpy as np
 import pytest
+from dolfinx.mesh import CellType
 from mpi4py import MPI
 
 import fenicsmpm as fm
@@ -72,6 +73,27 @@ def test_cpdi2_converges(sweep):
           f"{sweep[32]['stress']:.4g}")
     assert ratio <= 0.35, f"CPDI2 error ratio {ratio:.3f} at h/2 (tol 0.35)"
     assert e2 < 0.01, f"CPDI2 displacement error {e2:.4g} at h = 1/32 (tol 1 %)"
+
+
+def test_triangles_converge_with_the_default_shape():
+    """Issue 15: on triangles shape="auto" picks CPDI2 with the triangular domains of
+    Particles.fill (the sub-triangles, shapes.cpdi.initial_simplices). Full sweep (`python -m
+    fenicsmpm.bench mms`, "auto triangle" series, n = 8-64): displacement 4.5e-2 / 1.5e-2 /
+    4.4e-3 / 1.1e-3, stress 0.171 / 0.056 / 0.021 / 0.0095, orders 1.78 / 1.39 (with the
+    axis-aligned square domains of before: 2.1 % / 11 % at n = 64, orders 0.46 / 0.22, the
+    error growing from n = 32 to 64). Asserted at n = 16 -> 32: displacement ratio <= 0.35
+    (measured 0.28) and stress ratio <= 0.45 (measured 0.375)."""
+    err = {}
+    for n in (16, 32):
+        sim, ex = axis_aligned(fm.Explicit("MUSL"), n_cells=n, shape="auto",
+                               cell_type=CellType.triangle)
+        assert sim.shape == "cpdi2", sim.shape
+        sim.run(steps=ex.steps, progress=False)
+        err[n] = errors(sim, ex)
+    rd = err[32]["displacement"] / err[16]["displacement"]
+    rs = err[32]["stress"] / err[16]["stress"]
+    assert rd <= 0.35 and rs <= 0.45, (err, rd, rs)
+    assert err[32]["displacement"] < 0.006 and err[32]["stress"] < 0.025, err
 
 
 @pytest.mark.skipif(comm.size == 1, reason="compares a parallel run with a serial one")

@@ -261,25 +261,66 @@ def corner_weights3(corners, w_out, g_out):
 
 
 @njit(cache=True)
-def _tet_corners(x, F, r0, corners_out, lo, hi):
+def _simplex_corners(x, F, r0, corners_out, lo, hi):
+    d = x.shape[1]
     for p in range(lo, hi):
-        for c in range(4):
-            for i in range(3):
-                corners_out[p, c, i] = (x[p, i] + F[p, i, 0] * r0[p, c, 0] + F[p, i, 1] * r0[p, c, 1]
-                                        + F[p, i, 2] * r0[p, c, 2])
+        for c in range(r0.shape[1]):
+            for i in range(d):
+                s = x[p, i]
+                for j in range(d):
+                    s += F[p, i, j] * r0[p, c, j]
+                corners_out[p, c, i] = s
 
 
 @njit(parallel=PRANGE, cache=True)
-def tet_corners(x, F, r0, corners_out):
-    """Corners of tetrahedral CPDI1 domains: x_c = x_p + F_p r_c^0 (r0 (n, 4, 3), the initial
-    corner offsets from the centroid, sum_c r_c^0 = 0)."""
+def simplex_corners(x, F, r0, corners_out):
+    """Corners of triangular / tetrahedral CPDI1 domains: x_c = x_p + F_p r_c^0 (r0 (n, d + 1,
+    d), the initial corner offsets from the centroid, sum_c r_c^0 = 0)."""
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _tet_corners(x, F, r0, corners_out, np.int64(0), n)
+        return _simplex_corners(x, F, r0, corners_out, np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        _tet_corners(x, F, r0, corners_out, lo, hi)
+        _simplex_corners(x, F, r0, corners_out, lo, hi)
+
+
+@njit(cache=True)
+def _tri_weights(corners, w_out, g_out, lo, hi):
+    vmin = np.inf
+    for p in range(lo, hi):
+        e1x = corners[p, 1, 0] - corners[p, 0, 0]
+        e1y = corners[p, 1, 1] - corners[p, 0, 1]
+        e2x = corners[p, 2, 0] - corners[p, 0, 0]
+        e2y = corners[p, 2, 1] - corners[p, 0, 1]
+        g_out[p, 1, 0] = 0.5 * e2y
+        g_out[p, 1, 1] = -0.5 * e2x
+        g_out[p, 2, 0] = -0.5 * e1y
+        g_out[p, 2, 1] = 0.5 * e1x
+        g_out[p, 0, 0] = -(g_out[p, 1, 0] + g_out[p, 2, 0])
+        g_out[p, 0, 1] = -(g_out[p, 1, 1] + g_out[p, 2, 1])
+        A = 0.5 * (e1x * e2y - e1y * e2x)
+        for c in range(3):
+            w_out[p, c] = A / 3.0
+        vmin = min(vmin, A)
+    return vmin
+
+
+@njit(parallel=PRANGE, cache=True)
+def tri_weights(corners, w_out, g_out):
+    """Triangular domains (corners (n, 3, 2), positively oriented), linear M_c: w_c = A_p / 3,
+    g_c = A_p grad M_c: g_1 = (e2_y, -e2_x) / 2, g_2 = (-e1_y, e1_x) / 2 (e_k = x_k - x_0),
+    g_0 = -(g_1 + g_2), A_p = (e1 x e2) / 2 (the 2D case of tet_weights). Returns the
+    smallest A_p."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _tri_weights(corners, w_out, g_out, np.int64(0), n)
+    vmin = np.empty(nc)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        vmin[c] = _tri_weights(corners, w_out, g_out, lo, hi)
+    return vmin.min()
 
 
 @njit(cache=True)
@@ -321,34 +362,34 @@ def tet_weights(corners, w_out, g_out):
     return vmin.min()
 
 
-def initial_tets(grid, particles):
-    """Initial tetrahedral domains (n, 4, 3) as offsets from x_p, vertices 1 and 2 swapped
-    where a domain is negatively oriented. A particle of Particles.fill(per_cell=k) (volume
-    V_cell / k^3, at the centroid of sub-tetrahedron j of particles.tet_subdivision(k) in its
-    cell) gets that sub-tetrahedron: the domains tile the body (with k = 1 they are the
-    cells). Any other particle gets its cell shrunk about its centroid to volume V0_p,
-    r_c^0 = (V0_p / V_cell)^(1/3) (X_c - X_centroid)."""
-    from ..particles import tet_subdivision
-    p = particles
-    X = grid.node_x[grid.cell_nodes[p.cell]]                   # (n, 4, 3)
+def initial_simplices(grid, particles):
+    """Initial triangular / tetrahedral domains (n, d + 1, d) as offsets from x_p, vertices 1
+    and 2 swapped where a domain is negatively oriented. A particle of
+    Particles.fill(per_cell=k) (measure V_cell / k^d, at the centroid of sub-simplex j of
+    particles.simplex_subdivision(d, k) in its cell) gets that sub-simplex: the domains tile
+    the body (with k = 1 they are the cells). Any other particle gets its cell shrunk about
+    its centroid to its measure V0_p, r_c^0 = (V0_p / V_cell)^(1/d) (X_c - X_centroid)."""
+    from ..particles import simplex_subdivision
+    p, d = particles, grid.gdim
+    X = grid.node_x[grid.cell_nodes[p.cell]][:, :, :d]        # (n, d + 1, d)
     e = X[:, 1:] - X[:, :1]
     det = np.linalg.det(e) if len(X) else np.zeros(0)
-    s = np.cbrt(p.V0 / (np.abs(det) / 6.0))
+    ref = 0.5 if d == 2 else 1.0 / 6.0                        # reference measure
+    s = (p.V0 / (np.abs(det) * ref)) ** (1.0 / d)
     out = (X - X.mean(axis=1, keepdims=True)) * s[:, None, None]
     k = np.rint(1.0 / s).astype(int) if len(X) else np.zeros(0, int)
-    for kk in np.unique(k[(k > 1) & (np.abs(k * s - 1.0) < 1e-8)]):
-        sub = tet_subdivision(int(kk))                         # (kk^3, 4, 3) reference
+    fits = (k > 1) & (np.abs(k * s - 1.0) < 1e-8)
+    for kk in np.unique(k[fits]):
+        sub = simplex_subdivision(d, int(kk))                 # (kk^d, d + 1, d) reference
         cen = sub.mean(axis=1)
-        sel = np.flatnonzero((k == kk) & (np.abs(kk * s - 1.0) < 1e-8))
-        dist = np.linalg.norm(p.xi[sel, None, :] - cen[None], axis=2)
+        sel = np.flatnonzero(fits & (k == kk))
+        dist = np.linalg.norm(p.xi[sel, None, :d] - cen[None], axis=2)
         j = np.argmin(dist, axis=1)
         hit = dist[np.arange(len(sel)), j] < 1e-8
         sel, j = sel[hit], j[hit]
-        # x = X_0 + e^T xi for the affine cell map
-        Xs = X[sel, :1] + np.einsum("pcr,prk->pck", sub[j], e[sel])
+        Xs = X[sel, :1] + np.einsum("pcr,prk->pck", sub[j], e[sel])   # x = X_0 + e^T xi
         out[sel] = Xs - Xs.mean(axis=1, keepdims=True)
-    ed = out[:, 1:] - out[:, :1]
-    flip = (np.linalg.det(ed) < 0) if len(X) else np.zeros(0, bool)
+    flip = (np.linalg.det(out[:, 1:] - out[:, :1]) < 0) if len(X) else np.zeros(0, bool)
     out[flip, 1], out[flip, 2] = out[flip, 2].copy(), out[flip, 1].copy()
     return out
 
@@ -434,8 +475,8 @@ def initial_edges(grid, particles):
     """CPDI1 edge vectors r_k^0 (n, d, d) of volume V0_p: on quadrilaterals/hexahedra the
     particle's cell edges e_k = x_(vertex 2^k) - x_(vertex 0) scaled by (V0_p / |det e|)^(1/d)
     (for Particles.fill with n per direction: e_k / n on parallelogram/parallelepiped cells),
-    with e1, e2 swapped where det e < 0; on triangles/tetrahedra an axis-aligned square/cube of
-    side V0_p^(1/d)."""
+    with e1, e2 swapped where det e < 0; on triangles/tetrahedra (shapes.gauss_gimp; CPDI uses
+    initial_simplices there) an axis-aligned square/cube of side V0_p^(1/d)."""
     from . import standard as ks
     n, d = len(particles), grid.gdim
     r0 = np.zeros((n, d, d))
@@ -458,10 +499,14 @@ def initial_edges(grid, particles):
 
 class CpdiShape:
     """CPDI1 (version 1) or CPDI2 (version 2) for a 2D or 3D Simulation: parallelogram /
-    parallelepiped domains (CPDI1), quadrilateral / hexahedral domains (CPDI2).
+    parallelepiped domains (CPDI1), quadrilateral / hexahedral domains (CPDI2); on triangle and
+    tetrahedron meshes triangular / tetrahedral domains (the sub-simplices of
+    Particles.fill, initial_simplices), moved affinely with F (CPDI1) or corner by corner
+    (CPDI2; Sadeghirad et al. 2013).
 
-    Adds the particle field `cpdi_r0` (n, d, d), the initial edge vectors (initial_edges),
-    and for CPDI2 `cpdi_corners` (n, 4, 2) or (n, 8, 3), started as the CPDI1 domains. A corner
+    Adds the particle field `cpdi_r0` (n, d, d), the initial edge vectors (initial_edges), or on
+    simplex meshes `cpdi_t0` (n, d + 1, d), the initial corner offsets, and for CPDI2
+    `cpdi_corners` (n, 4, 2), (n, 8, 3) or (n, d + 1, d), started as the CPDI1 domains. A corner
     outside the mesh (a particle at the boundary) uses the basis of the particle's own cell,
     extended linearly: the weights still sum to 1 and reproduce affine fields."""
 
@@ -477,19 +522,19 @@ class CpdiShape:
         from . import standard as ks
         self.version = int(version)
         self.d = d
-        self.tets = d == 3 and grid.kind == ks.SIMPLEX
-        self.n_corners = N_CORNERS if d == 2 else 4 if self.tets else N_CORNERS_3D
-        if self.tets and not hasattr(p, "cpdi_t0"):
-            p.add_field("cpdi_t0", (4, 3))[:] = initial_tets(grid, p)
-        if not self.tets and not hasattr(p, "cpdi_r0"):
+        self.simplex = grid.kind == ks.SIMPLEX
+        self.n_corners = d + 1 if self.simplex else N_CORNERS if d == 2 else N_CORNERS_3D
+        if self.simplex and not hasattr(p, "cpdi_t0"):
+            p.add_field("cpdi_t0", (d + 1, d))[:] = initial_simplices(grid, p)
+        if not self.simplex and not hasattr(p, "cpdi_r0"):
             p.add_field("cpdi_r0", (d, d))[:] = initial_edges(grid, p)
         if self.version == 2 and not hasattr(p, "cpdi_corners"):
             self._cpdi1_corners(p, p.add_field("cpdi_corners", (self.n_corners, d)))
         self._corner_shape = None
 
     def _cpdi1_corners(self, p, out):
-        if self.tets:
-            tet_corners(p.x, p.F, p.cpdi_t0, out)
+        if self.simplex:
+            simplex_corners(p.x, p.F, p.cpdi_t0, out)
         elif self.d == 2:
             cpdi1_corners(p.x, p.F, p.cpdi_r0, out)
         else:
@@ -519,7 +564,8 @@ class CpdiShape:
         cN = cN.reshape(n, ncor, nvc)
         w = np.empty((n, ncor))
         gc = np.empty((n, ncor, d))
-        weights = (corner_weights if d == 2 else tet_weights if self.tets else
+        weights = ((tri_weights if d == 2 else tet_weights) if self.simplex else
+                   corner_weights if d == 2 else
                    parallelepiped_weights if self.version == 1 else corner_weights3)
         if n and weights(corners, w, gc) <= 0.0:
             bad = int(np.argmin(w.sum(axis=1)))
