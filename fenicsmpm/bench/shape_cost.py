@@ -9,6 +9,10 @@ block over [0.2, 0.8]^2 (E = 1e6, nu = 0.3, rho = 1000) with 2 x 2 particles per
 gravity; explicit MUSL at dt = 0.5 h / c_p. For each family: `warmup` untimed steps (JIT and
 cache loading), then `steps` timed steps (common.time_steps), the fastest of `repeats` runs.
 
+Row cpdi2-triangle: CPDI2 on a triangle mesh of about the same cell count (round(n / sqrt 2)
+squares per side, split in two); doc["triangle_over_cpgimp"] its cost over cpGIMP's (issue 16
+target 1.5).
+
 Metrics: wall_per_particle_step_s, ratio_to_mpm (the same for standard MPM: 1), the
 stage timers per particle-step (shape, p2g, g2p, constitutive, ...), nodes_per_particle
 (the stencil width). Output: shape-cost.json, shape-cost.png (stacked stage times per family)
@@ -21,18 +25,26 @@ import numpy as np
 from . import common
 
 CASE = "shape-cost"
-SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2")
+SHAPES = ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "cpdi2-triangle")
+TRIANGLE_TARGET = 1.5        # issue 16: CPDI2 on triangles at most 1.5x cpGIMP on quads
 SIZES = {"full": dict(n=160, steps=20, repeats=3), "quick": dict(n=40, steps=5, repeats=2)}
 TARGET_RATIO = 2.0
 
 
 def _scene(shape, n, comm):
+    """The scene; shape "cpdi2-triangle" is CPDI2 on a triangle mesh of round(n / sqrt 2)
+    squares per side, each split in two: about the cell (and particle) count of the quads."""
     import fenicsmpm as fm
     from dolfinx import mesh as dmesh
     from ..grid import vertex_ghost_partitioner
     kw = {} if shape == "mpm" else {"partitioner": vertex_ghost_partitioner()}
-    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n, n],
-                                 dmesh.CellType.quadrilateral, **kw)
+    if shape == "cpdi2-triangle":
+        shape, n = "cpdi2", max(1, int(round(n / np.sqrt(2.0))))
+        msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n, n],
+                                     dmesh.CellType.triangle, **kw)
+    else:
+        msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n, n],
+                                     dmesh.CellType.quadrilateral, **kw)
     grid = fm.Grid(msh)
     mat = fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)
     pts = fm.Particles.fill(grid, mat, per_cell=2,
@@ -84,19 +96,27 @@ def run(quick=False, out="bench-results", comm=None, n=None, steps=None, repeats
         m = dict(wall_per_particle_step_s=t["wall_s"] / ps, cpu_s=t["cpu_s"], setup_s=setup,
                  nodes_per_particle=width,
                  **{f"t_{k}_per_particle_step_s": v / ps for k, v in t["timers"].items()})
-        cfg = dict(integrator="Explicit", scheme="MUSL", shape=shape, h=1.0 / size["n"], dt=sim.dt,
-                   ppc=4, cell_type="quadrilateral", cells_along=size["n"])
+        tri = shape.endswith("triangle")
+        cfg = dict(integrator="Explicit", scheme="MUSL", shape=sim.shape, h=sim.grid.h, dt=sim.dt,
+                   ppc=4, cell_type="triangle" if tri else "quadrilateral",
+                   cells_along=int(round(size["n"] / np.sqrt(2.0))) if tri else size["n"])
         rec = common.make_record(f"{shape}", cfg, npart,
                                  comm.allreduce(sim.grid.n_owned_cells) if comm.size > 1
                                  else sim.grid.n_owned_cells, size["steps"], t["wall_s"], m)
         runs.append(rec)
-    ref = next(r for r in runs if r["config"]["shape"] == "mpm")["metrics"]["wall_per_particle_step_s"]
+    ref = next(r for r in runs if r["name"] == "mpm")["metrics"]["wall_per_particle_step_s"]
     for r in runs:
         r["metrics"]["ratio_to_mpm"] = r["metrics"]["wall_per_particle_step_s"] / ref
-    ratios = {r["config"]["shape"]: r["metrics"]["ratio_to_mpm"] for r in runs}
+    ratios = {r["name"]: r["metrics"]["ratio_to_mpm"] for r in runs}
+    if "cpgimp" in ratios and "cpdi2-triangle" in ratios:
+        ratios_extra = dict(triangle_over_cpgimp=ratios["cpdi2-triangle"] / ratios["cpgimp"],
+                            triangle_target=TRIANGLE_TARGET)
+    else:
+        ratios_extra = {}
     doc = common.result(CASE, runs, comm, quick=quick, jit_s=jit, ratio_to_mpm=ratios,
                         target_ratio=TARGET_RATIO,
                         within_target={k: v <= TARGET_RATIO for k, v in ratios.items()},
+                        **ratios_extra,
                         total_wall_s=time.perf_counter() - t_start)
     common.write_result(doc, out, comm)
     _plot(doc, out, comm)
