@@ -54,8 +54,13 @@ Measured (serial, 2026-12-01, load average 2-6 on 2 cores):
     and 0.52, 0.41, 0.44, 0.40 m in 4 blows (270 s wall). The ramp at h = 0.15 m (19k steps,
     ~15 min CPU) was not run.
   python3 demos/pile_driving.py --quick   (the test: h = 0.3 m, gap 0, 2 blows every 0.25 s;
-    30-45 s serial, 60 s under mpirun -n 2): base sigma_zz +0.8 % off rho g (H - z), penetration 0.90 / 0.53 m, peak
-    resistance 60 / 121 kN, void ratio near the tip down to 0.600.
+    13 s serial, 2026-12-02): base sigma_zz +0.8 % off rho g (H - z), penetration 0.627 /
+    0.400 m, peak resistance 134.6 / 111.8 kN, void ratio near the tip down to 0.603. Since
+    dt="auto" follows the state (Simulation.follow_state_dt) the step shrinks to 0.5-0.9 of
+    its initial value while the sand under the tip is compressed beyond p_max; before, with
+    the initial dt above the state's critical step, the same run gave 0.90 / 0.53 m and 60 /
+    121 kN. The other runs in this docstring (2026-12-01) were made with the initial dt and
+    were not re-run.
 Convergence in h (first blow, K0 start, 0.2 s settling; --h H --per-cell P --blows 1):
                        h = 0.6 m (P 4)   h = 0.3 m (P 2)   h = 0.15 m (P 2)
     plain (default)    -0.108 m          -0.005 m          0.676 m

@@ -26,9 +26,11 @@ vertical stress below the tip at the end, and the resistance against two closed-
 estimates at the final depth d: shaft friction mu K0 (rho g d / 2) 2 pi r d and the tip
 bearing N_q rho g d pi r^2 with N_q = exp(pi tan phi) tan^2(45 + phi / 2) = 18.4 (both
 rough: the pile displaces the soil and changes K).
-Measured (serial, 2026-12-01; the default shape is the standard family for Mohr-Coulomb):
-h = 0.3 m (--quick), 0.6 s: penetration 0.276 m, resistance 23.9 kN against 7.0 kN
-estimated, sigma_zz below the tip -131 kPa; h = 0.15 m, 1 s: penetration 0.475 m,
+Measured (serial, 2026-12-02; the default shape is the standard family for Mohr-Coulomb):
+h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 24.4 kN against 7.0 kN
+estimated, sigma_zz below the tip -59.3 kPa (with dt="auto" following the state the step
+shrinks twice by 9 %; with the initial dt throughout: 0.276 m, 23.9 kN, -54.7 kPa).
+2026-12-01, with the initial dt: h = 0.15 m, 1 s: penetration 0.475 m,
 resistance 26.6 kN against 12.1 kN, sigma_zz below the tip -350 kPa (on 2026-11-22, before
 the contact changes of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
 The resistance is NOT converged: with the pile one cell wide the rigid body's reaction (minus

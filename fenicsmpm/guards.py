@@ -116,12 +116,53 @@ def check_particles(sim, vol_tol=1e-6):
     raise (FloatingPointError if code <= 4 else RuntimeError)(msg)
 
 
+@njit(cache=True)
+def _stretch(material_id, V, V0, stress, out):
+    """out[k] = max(out[k], V_p / V0_p) over the particles of material k that carry stress."""
+    for p in range(V.shape[0]):
+        s = 0.0
+        for i in range(3):
+            for j in range(3):
+                s += abs(stress[p, i, j])
+        if s > 0.0:
+            r = V[p] / V0[p]
+            k = material_id[p]
+            if r > out[k]:
+                out[k] = r
+
+
+def state_wave_speed(sim):
+    """The largest P-wave speed of the deformable materials (Simulation._deformable_materials)
+    in their current state, collective. A material with a stress-dependent stiffness gives
+    its state_p_wave_speed(stress) (Hypoplastic: the bound at the largest mean stress when it
+    is above p_max; its stretched, loose particles are at low pressure and soft). Any other
+    gives p_wave_speed sqrt(J_max), J_max >= 1 the largest volume ratio V / V0 of its
+    particles that carry stress (c_p = sqrt(M / rho) and rho = rho_0 / J: a stretched
+    particle is lighter for the same stiffness); particles without stress (a cohesionless
+    material pulled apart) add no stiffness and do not count."""
+    p = sim.particles
+    mats = p.materials
+    J = np.ones(len(mats))
+    _stretch(p.material_id, p.V, p.V0, p.stress, J)
+    c = np.zeros(len(mats))
+    for k, m in enumerate(mats):
+        if any(m is w for w in sim._wave_materials):
+            f = getattr(m, "state_p_wave_speed", None)
+            c[k] = (m.p_wave_speed * np.sqrt(J[k]) if f is None
+                    else f(p.stress[p.material_id == k]))
+    if sim.comm.size > 1:
+        from mpi4py import MPI
+        sim.comm.Allreduce(MPI.IN_PLACE, c, op=MPI.MAX)
+    return float(c.max())
+
+
 def check_wave_speed(sim):
     """Warn once (rank 0) when a material whose stiffness grows with its state (a
     `state_p_wave_speed(stress)` method, e.g. Hypoplastic above p_max) now has a P-wave speed
-    for which the explicit dt exceeds the critical step stability_factor h / c_p: dt="auto"
-    was set from the initial bound and does not follow the state. Collective."""
-    if not sim.integrator.explicit or getattr(sim, "_wave_warned", False):
+    for which the explicit dt exceeds the critical step stability_factor h / c_p. A fixed dt
+    only: dt="auto" follows the state (Simulation.follow_state_dt). Collective."""
+    if (not sim.integrator.explicit or getattr(sim, "_wave_warned", False)
+            or getattr(sim, "_dt_auto", False)):
         return
     p = sim.particles
     worst = (0.0, None)

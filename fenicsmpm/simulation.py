@@ -30,12 +30,14 @@ from .shapes import choose_shape, resolve_shape, standard as ks, wide_shape
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
 MANY_STEPS = 1_000_000         # dt="auto" runs longer than this many steps are warned about
 WAVE_CHECK_EVERY = 100         # steps between guards.check_wave_speed checks
+DT_BAND = 1.1                  # dt="auto" changes when the state's critical step moves by 10 %
 
 
 class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     """An MPM simulation of `particles` on `grid`, advanced by `integrator`.
 
-    dt: time step (> 0), or "auto" for explicit integrators (cfl * h / max c_p).
+    dt: time step (> 0), or "auto" for explicit integrators (cfl * h / max c_p, then
+    following the state: follow_state_dt).
     gravity: body acceleration vector (length gdim), default zero.
     mass_tolerance: nodes with mass below this fraction of the largest nodal mass are
     inactive (no velocity, no division by a vanishing mass; constrained in implicit solves).
@@ -178,7 +180,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             if not self.integrator.explicit:
                 raise ValueError("Simulation: dt='auto' is only defined for explicit integrators")
             self._dt_auto = True
-            return self.cfl * self.dt_critical
+            self._dt_base = self.cfl * self.dt_critical      # the bound follow_state_dt keeps
+            return self._dt_base
         self._dt_auto = False
         if not isinstance(dt, (int, float, np.floating)) or not math.isfinite(dt) or dt <= 0:
             raise ValueError(f"Simulation: 'dt' must be > 0, got {dt!r}")
@@ -486,8 +489,24 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             return
         self.t += dt
 
+    def follow_state_dt(self):
+        """dt="auto" (explicit): the step of the current state, cfl * stability_factor * h /
+        c_p with c_p = guards.state_wave_speed (density and stiffness of the deformed
+        particles), at most the initial step. Taken when it differs from the step in use by
+        more than DT_BAND (10 %), so small-strain runs keep their initial dt. Collective;
+        called before every explicit step (issue 21: the critical step follows the state)."""
+        from .guards import state_wave_speed
+        c = state_wave_speed(self)
+        sf = getattr(self.integrator, "stability_factor", 1.0)
+        new = min(self.cfl * sf * self.grid.h / c, self._dt_base) if c > 0 else self._dt_base
+        if new * DT_BAND < self.dt or (self.dt < self._dt_base and new > DT_BAND * self.dt):
+            self.dt = new
+
     def step(self):
-        """Advance one time step (see `max_dt_cuts` for implicit retries)."""
+        """Advance one time step (see `max_dt_cuts` for implicit retries; dt="auto" follows the
+        state, follow_state_dt)."""
+        if self._dt_auto and self.integrator.explicit:
+            self.follow_state_dt()
         self._advance(self.dt, self.max_dt_cuts)
         self.step_count += 1
         t0 = time.perf_counter()
@@ -554,8 +573,11 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         if checkpoint_every is not None and not (
                 isinstance(checkpoint_every, (int, np.integer)) and checkpoint_every >= 1):
             raise ValueError(f"run: 'checkpoint_every' must be a positive integer, got {checkpoint_every!r}")
+        # with t_end, a dt that follows the state (dt="auto", explicit) may change during the
+        # run: step until t_end instead of a fixed count (the same count while dt stays)
+        follow = t_end is not None and self._dt_auto and self.integrator.explicit
         self._check_run(steps)
-        t_final = self.t + steps * self.dt
+        t_final = t_end if follow else self.t + steps * self.dt
         self.stats["courant"] = self.courant
         note = "" if self.integrator.explicit else f"Courant {self.courant:.3g}"
         bar = Progress(steps, t_final, self.comm, force=progress, note=note)
@@ -564,17 +586,20 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             if self.step_count == 0:
                 output.write(self)
         try:
-            for k in range(steps):
+            k = 0
+            while (self.t < t_end - 1e-9 * self.dt) if follow else (k < steps):
                 try:
                     self.step()
                 except (RuntimeError, FloatingPointError) as err:
                     if getattr(err, "state_intact", False):
                         self._save_last_state(output, checkpoint)
                     raise
-                bar.update(k + 1, self.t)
+                k += 1
+                last = not (self.t < t_end - 1e-9 * self.dt) if follow else k == steps
+                bar.update(min(k, steps - 1) if follow and not last else k, self.t)
                 if output is not None and self.step_count % output.every == 0:
                     output.write(self)
-                if checkpoint is not None and (self.step_count % checkpoint_every == 0 or k == steps - 1):
+                if checkpoint is not None and (self.step_count % checkpoint_every == 0 or last):
                     self.checkpoint(checkpoint)
         finally:
             bar.close()

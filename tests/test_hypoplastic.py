@@ -229,17 +229,35 @@ def _column(comm, partitioner=None, ramp=0.5, geo=False, integrator=None, tol=1e
 
 
 @pytest.mark.parametrize("p_max", [1e3, 60e3])
-def test_dt_auto_warns_when_the_state_outgrows_p_max(comm, p_max):
-    """dt="auto" comes from the P-wave speed at p_max. The geostatic column's largest mean
-    stress is 25.8 kPa: with p_max = 1 kPa (c_p 145 m/s there, 342 m/s at 25.8 kPa, so
-    dt = 0.5 h / 145 m/s is above h / 342 m/s) the run warns at its start that dt exceeds the
-    critical step (guards.check_wave_speed, naming the material and p_max); with p_max = 60 kPa
-    it does not."""
+def test_dt_follows_the_state_beyond_p_max(comm, p_max):
+    """dt="auto" starts from the P-wave speed at p_max. The geostatic column's largest mean
+    stress is 25.8 kPa: with p_max = 1 kPa (c_p 145 m/s there, 342 m/s at 25.8 kPa) the first
+    step already uses the critical step of the state, cfl h / 342 m/s (Simulation.follow_state_dt,
+    issue 21), without a warning; with p_max = 60 kPa dt stays. With a fixed dt above the
+    state's critical step the run warns at its start (guards.check_wave_speed, naming the
+    material and p_max)."""
     import warnings
     sim, m = _column(comm, geo=True, p_max=p_max)
+    dt0 = sim.dt
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
         sim.run(steps=1)
+    assert not [w for w in rec if "exceeds the critical step" in str(w.message)]
+    p = sim.particles
+    pmax = -np.trace(p.stress, axis1=1, axis2=2).min(initial=0.0) / 3.0
+    pmax = comm.allreduce(float(pmax), op=MPI.MAX)
+    c = m.state_p_wave_speed(np.diag([-pmax] * 3)[None])
+    if p_max < 10e3:
+        assert pmax > 20e3 and c > 300.0, (pmax, c)
+        assert sim.dt < 0.5 * dt0 and np.isclose(sim.dt, sim.cfl * sim.grid.h / c, rtol=0.02), \
+            (sim.dt, dt0, sim.cfl * sim.grid.h / c)
+    else:
+        assert sim.dt == dt0
+    sim2, _ = _column(comm, geo=True, p_max=p_max)
+    sim2.start_stage(dt=dt0)                            # a fixed dt: the guard warns
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        sim2.run(steps=1)
     hit = [w for w in rec if "exceeds the critical step" in str(w.message)]
     if comm.rank == 0:
         assert len(hit) == (1 if p_max < 10e3 else 0), [str(w.message) for w in rec]
