@@ -169,6 +169,19 @@ def test_stretched_cpgimp_widens_the_pattern_or_raises():
     sim.step()
     assert sim.integrator.system.rings > 2
     assert np.all(np.isfinite(sim.particles.stress))
+    # Newmark's iterative default: after a switch to LU (a failed GMRES, forced here) the
+    # widened system keeps LU; without the switch it starts from the iterative default
+    for switched in (False, True):
+        sim = _block("cpgimp", fm.Newmark())
+        assert sim.integrator.system.fallback
+        if switched:
+            sim.integrator.system._use_direct(-3)
+        sim.particles.F[:, 0, 0] = 6.0
+        sim.step()
+        sys = sim.integrator.system
+        assert sys.rings > 2 and sys.switched == switched
+        assert sys.fallback != switched
+        assert (sys.ksp.getType() == "preonly") == switched, sys.ksp.getType()
     sim = _block("cpgimp", fm.QuasiStatic())
     sim.particles.F[:, 0, 0] = 12.0          # l = 3 L: nodes 7 cells apart
     with pytest.raises(RuntimeError, match="outside the static matrix pattern"):

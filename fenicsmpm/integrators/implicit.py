@@ -73,10 +73,11 @@ class _Newton:
                                       f"grid (got an axisymmetric grid)")
         self.system = self._system(sim, stencil_rings(sim), shape)
 
-    def _system(self, sim, rings, shape):
-        """The LinearSystem of this integrator's options with a pattern of `rings` cell rings."""
+    def _system(self, sim, rings, shape, iterative=None):
+        """The LinearSystem of this integrator's options with a pattern of `rings` cell rings
+        (iterative: the KSP default, None for this integrator's)."""
         return LinearSystem(sim.grid, self.petsc_options, self.prefix, rings=rings, shape=shape,
-                            iterative=self.iterative_default)
+                            iterative=self.iterative_default if iterative is None else iterative)
 
     def _plan(self, sim):
         """(scatter plan, system) for this step. A wide family's particle domain that has
@@ -89,7 +90,10 @@ class _Newton:
                 old = self.system
                 if old.rings >= MAX_RINGS or getattr(self, "double_mapping", False):
                     raise
-                self.system = self._system(sim, old.rings + 1, old.shape)
+                # a system whose iterative default failed keeps LU after the widening
+                self.system = self._system(sim, old.rings + 1, old.shape,
+                                           iterative=False if old.switched else None)
+                self.system.switched = old.switched
                 old.destroy()
                 if sim.comm.rank == 0:
                     logging.getLogger("fenicsmpm").info(

@@ -93,6 +93,7 @@ class LinearSystem:
         self.prefix = prefix
         self.fallback = bool(iterative) and not petsc_options and not any(
             k.startswith(prefix) for k in opts.getAll())
+        self.switched = False             # the iterative default failed and LU took over
         merged = dict(ITERATIVE) if self.fallback else _direct(grid.comm)
         merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
         merged.update(petsc_options or {})
@@ -202,6 +203,7 @@ class LinearSystem:
     def _use_direct(self, reason):
         """Switch the KSP to the direct default (collective: the converged reason is global)."""
         self.fallback = False
+        self.switched = True
         if self.grid.comm.rank == 0:
             logging.getLogger("fenicsmpm").warning(
                 "the iterative linear solver (GMRES + block Jacobi/ILU) failed (%s after %d "
