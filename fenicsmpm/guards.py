@@ -131,29 +131,39 @@ def _stretch(material_id, V, V0, stress, out):
                 out[k] = r
 
 
-def state_wave_speed(sim):
-    """The largest P-wave speed of the deformable materials (Simulation._deformable_materials)
-    in their current state, collective. A material with a stress-dependent stiffness gives
-    its state_p_wave_speed(stress) (Hypoplastic: the bound at the largest mean stress when it
-    is above p_max; its stretched, loose particles are at low pressure and soft). Any other
-    gives p_wave_speed sqrt(J_max), J_max >= 1 the largest volume ratio V / V0 of its
-    particles that carry stress (c_p = sqrt(M / rho) and rho = rho_0 / J: a stretched
-    particle is lighter for the same stiffness); particles without stress (a cohesionless
-    material pulled apart) add no stiffness and do not count."""
+def material_wave_speeds(sim, stretch=True):
+    """Per material (global, collective) the P-wave speed of its current state: a material with
+    a stress-dependent stiffness gives its state_p_wave_speed(stress) (Hypoplastic: the bound
+    at the largest mean stress when it is above p_max; its stretched, loose particles are at
+    low pressure and soft); with `stretch` any other gives p_wave_speed sqrt(J_max), J_max >= 1
+    the largest volume ratio V / V0 of its particles that carry stress (c_p = sqrt(M / rho),
+    rho = rho_0 / J: a stretched particle is lighter for the same stiffness; particles without
+    stress, a cohesionless material pulled apart, add no stiffness), without it 0."""
     p = sim.particles
     mats = p.materials
     J = np.ones(len(mats))
-    _stretch(p.material_id, p.V, p.V0, p.stress, J)
+    if stretch:
+        _stretch(p.material_id, p.V, p.V0, p.stress, J)
     c = np.zeros(len(mats))
     for k, m in enumerate(mats):
-        if any(m is w for w in sim._wave_materials):
-            f = getattr(m, "state_p_wave_speed", None)
-            c[k] = (m.p_wave_speed * np.sqrt(J[k]) if f is None
-                    else f(p.stress[p.material_id == k]))
+        f = getattr(m, "state_p_wave_speed", None)
+        if f is not None:
+            c[k] = f(p.stress[p.material_id == k])
+        elif stretch:
+            c[k] = m.p_wave_speed * np.sqrt(J[k])
     if sim.comm.size > 1:
         from mpi4py import MPI
         sim.comm.Allreduce(MPI.IN_PLACE, c, op=MPI.MAX)
-    return float(c.max())
+    return c
+
+
+def state_wave_speed(sim):
+    """The largest P-wave speed of the deformable materials (Simulation._deformable_materials)
+    in their current state (material_wave_speeds); collective."""
+    c = material_wave_speeds(sim)
+    mats = sim.particles.materials
+    return float(max(c[k] for k, m in enumerate(mats)
+                     if any(m is w for w in sim._wave_materials)))
 
 
 def check_wave_speed(sim):
@@ -165,17 +175,11 @@ def check_wave_speed(sim):
             or getattr(sim, "_dt_auto", False)):
         return
     p = sim.particles
-    worst = (0.0, None)
-    for k, mat in enumerate(p.materials):
-        f = getattr(mat, "state_p_wave_speed", None)
-        if f is not None:
-            c = f(p.stress[p.material_id == k])
-            worst = max(worst, (c, k), key=lambda r: r[0])
-    if sim.comm.size > 1:
-        worst = max(sim.comm.allgather(worst), key=lambda r: r[0])
-    c, k = worst
-    if k is None:
+    if not any(hasattr(m, "state_p_wave_speed") for m in p.materials):
         return
+    c_all = material_wave_speeds(sim, stretch=False)
+    k = int(np.argmax(c_all))
+    c = float(c_all[k])
     crit = getattr(sim.integrator, "stability_factor", 1.0) * sim.grid.h / c
     if sim.dt > crit:
         sim._wave_warned = True
