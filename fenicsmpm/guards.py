@@ -17,10 +17,17 @@ FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
 
 
 @njit(cache=True)
-def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, lo, hi):
+def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, material_id,
+                stretch, lo, hi):
     n_bad = 0
     d = x.shape[1]
     for p in range(lo, hi):
+        s = 0.0                         # the stretch V / V0 of a particle carrying stress
+        for i in range(3):
+            for j in range(3):
+                s += abs(stress[p, i, j])
+        if s > 0.0 and V[p] > stretch[material_id[p]] * V0[p]:
+            stretch[material_id[p]] = V[p] / V0[p]
         code = 5 if p < inverted.shape[0] and inverted[p] == 1 else 0
         for k in range(d if code == 0 else 0):
             if not np.isfinite(x[p, k]):
@@ -52,22 +59,29 @@ def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, l
 
 
 @njit(parallel=PRANGE, cache=True)
-def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out):
+def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, material_id, stretch):
     """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0, or an
     increment the commit refused: `inverted`), 6 (volume below vol_tol V0), 7 (|a|^2 > a_lim2:
     a velocity jump of more than a cell per step in one step, the start of a blow-up). An
     inversion is
     reported first: it is the cause of any non-finite value that follows it. Returns the
-    number of bad particles (threaded over particle chunks, kernels.threads)."""
+    number of bad particles (threaded over particle chunks, kernels.threads). In the same pass
+    stretch[k] = max(stretch[k], V_p / V0_p) over the particles of material k that carry
+    stress (material_wave_speeds)."""
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, np.int64(0), n)
+        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out,
+                           material_id, stretch, np.int64(0), n)
     bad = np.zeros(nc, dtype=np.int64)
+    part = np.ones((nc, stretch.shape[0]))
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         bad[c] = _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out,
-                              lo, hi)
+                             material_id, part[c], lo, hi)
+    for c in range(nc):
+        for k in range(stretch.shape[0]):
+            stretch[k] = max(stretch[k], part[c, k])
     return bad.sum()
 
 
@@ -77,12 +91,15 @@ def check_particles(sim, vol_tol=1e-6):
     h / dt in one step, |a_p| dt > h / dt, a kick that would move it a further cell per step;
     smooth motion, impacts and free fall change a particle's velocity by a fraction of that)
     naming step, time, field and the first offending particles; for a blow-up also their
-    speed, velocity jump, stress and volume ratio det F, and the likely causes."""
+    speed, velocity jump, stress and volume ratio det F, and the likely causes. The same pass
+    keeps the per-material stretch of the state for material_wave_speeds."""
     p = sim.particles
     bad = np.empty(len(p), dtype=np.int8)
     a_lim = sim.grid.h / sim.dt ** 2 if sim.integrator.explicit else np.inf
+    J = np.ones(len(p.materials))
     n_bad = _scan(p.x, p.v, p.a, p.stress, p.F, p.V, p.V0, sim._inverted, vol_tol, a_lim * a_lim,
-                  bad)
+                  bad, p.material_id, J)
+    sim._stretch = (_state_key(sim), J)
     sim._inverted[:] = 0
     if sim.comm.size > 1:
         n_bad = sim.comm.allreduce(n_bad)
@@ -116,19 +133,22 @@ def check_particles(sim, vol_tol=1e-6):
     raise (FloatingPointError if code <= 4 else RuntimeError)(msg)
 
 
-@njit(cache=True)
-def _stretch(material_id, V, V0, stress, out):
-    """out[k] = max(out[k], V_p / V0_p) over the particles of material k that carry stress."""
-    for p in range(V.shape[0]):
-        s = 0.0
-        for i in range(3):
-            for j in range(3):
-                s += abs(stress[p, i, j])
-        if s > 0.0:
-            r = V[p] / V0[p]
-            k = material_id[p]
-            if r > out[k]:
-                out[k] = r
+def _state_key(sim):
+    """What the stretch kept by check_particles belongs to: the step and the particle set."""
+    return sim.step_count, sim.particles.version, len(sim.particles)
+
+
+def _stretch(sim):
+    """Per material the largest V_p / V0_p (>= 1) of its particles that carry stress: the one
+    check_particles kept for this state, else a fresh scan (local; see _scan)."""
+    kept = getattr(sim, "_stretch", None)
+    if kept is not None and kept[0] == _state_key(sim):
+        return kept[1]
+    p = sim.particles
+    J = np.ones(len(p.materials))
+    _scan(p.x, p.v, p.a, p.stress, p.F, p.V, p.V0, sim._inverted[:0], 0.0, np.inf,
+          np.empty(len(p), dtype=np.int8), p.material_id, J)
+    return J
 
 
 def material_wave_speeds(sim, stretch=True):
@@ -141,9 +161,7 @@ def material_wave_speeds(sim, stretch=True):
     stress, a cohesionless material pulled apart, add no stiffness), without it 0."""
     p = sim.particles
     mats = p.materials
-    J = np.ones(len(mats))
-    if stretch:
-        _stretch(p.material_id, p.V, p.V0, p.stress, J)
+    J = _stretch(sim) if stretch else None
     c = np.zeros(len(mats))
     for k, m in enumerate(mats):
         f = getattr(m, "state_p_wave_speed", None)
