@@ -12,6 +12,11 @@ NP ?= 2
 MPIRUN := mpirun $(MPI_ROOT) -n $(NP)
 export OMPI_MCA_rmaps_base_oversubscribe = 1
 export OMPI_MCA_btl_vader_single_copy_mechanism = none
+# One numba cache for every pass, so each kernel compiles once per checkout (compiling is most
+# of a cold run's time). The serial pass's second pytest-xdist worker uses a copy of it
+# (tests/conftest.py: numba's cache index is not safe against two processes adding different
+# signatures of one function at once; the two MPI ranks add the same ones).
+export NUMBA_CACHE_DIR = $(CURDIR)/.numba-cache
 
 .PHONY: all deps deps-optional venv test test-serial test-mpi docs demo bench clean
 
@@ -49,12 +54,15 @@ $(VENV)/.installed: pyproject.toml | deps
 
 venv: $(VENV)/.installed
 
+# The 2-rank pass first: its ranks compile the kernels once, at the same time; the serial pass
+# then starts warm (its second worker from a copy of the cache).
 test: $(VENV)/.installed deps-optional
-	$(PY) -m pytest -q --color=no $(XDIST) tests
 	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
+	$(MAKE) --no-print-directory test-serial
 	$(MAKE) --no-print-directory docs
 
 test-serial: $(VENV)/.installed deps-optional
+	@if [ -n "$(XDIST)" ] && [ -d .numba-cache ]; then rm -rf .numba-cache-gw1 && cp -r .numba-cache .numba-cache-gw1; fi
 	$(PY) -m pytest -q --color=no $(XDIST) tests
 
 test-mpi: $(VENV)/.installed
@@ -72,4 +80,4 @@ bench: $(VENV)/.installed
 	$(PY) -m fenicsmpm.bench $(CASE)
 
 clean:
-	rm -rf $(VENV) results bench-results *.egg-info docs/_build docs/_generated .numba-cache-*
+	rm -rf $(VENV) results bench-results *.egg-info docs/_build docs/_generated .numba-cache .numba-cache-*
