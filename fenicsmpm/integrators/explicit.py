@@ -216,18 +216,25 @@ class Explicit:
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
         affine = self.transfer in AFFINE
-        x_start = p.x.copy() if affine and self.scheme in ("MUSL", "AVG") else p.x
+        remap = self.scheme in ("MUSL", "AVG")     # the updated velocities mapped back
+        x_start = p.x.copy() if affine and remap else p.x
+        mv2 = None
         if affine:
             kt.g2p_affine(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v0, v1,
                           self.flip if self.transfer == "aflip" else 0.0, p.x, p.v, p.u, p.apic_C)
+        elif remap:                                  # G2P and that P2G in one particle pass
+            mv2 = np.zeros_like(mv)
+            kt.g2p_momentum(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v,
+                            p.u, p.mass, mv2)
         else:
             kt.g2p(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
-        if self.scheme in ("MUSL", "AVG"):
-            _, mv2 = self._p2g(sim, p.v, x_start, False)
+        if remap:
+            if mv2 is None:
+                _, mv2 = self._p2g(sim, p.v, x_start, False)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
             if vp is not None:

