@@ -20,7 +20,7 @@ import numba
 import numpy as np
 
 from .neo_hookean import IsotropicHyperelastic, _current_F
-from .piola import det3, inv3
+from .piola import det3, eigh3, inv3
 
 __all__ = ["Hencky", "hencky_stress_kernel", "hencky_tangent_kernel"]
 
@@ -41,11 +41,7 @@ def _eig_b(F, lam, Q):
     for i in range(3):
         for j in range(3):
             b[i, j] = F[i, 0] * F[j, 0] + F[i, 1] * F[j, 1] + F[i, 2] * F[j, 2]
-    w, v = np.linalg.eigh(b)
-    for a in range(3):
-        lam[a] = w[a]
-        for i in range(3):
-            Q[i, a] = v[i, a]
+    eigh3(b, lam, Q)
 
 
 @numba.njit(cache=True)

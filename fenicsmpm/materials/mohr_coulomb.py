@@ -50,6 +50,7 @@ import numpy as np
 
 from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
+from .piola import eigh3
 from .regularisation import NonlocalSoftening
 from .validation import check_real
 
@@ -201,9 +202,9 @@ def _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl, Amat, B
 
 
 @numba.njit(cache=True)
-def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
-    """Principal-space return of s_tr (ascending) from history kap_n; writes sig and
-    A = d sig / d s_tr (3 x 3); returns (plastic, d eps_d^p, d eps_v^p, opening), opening
+def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M, want_A=True):
+    """Principal-space return of s_tr (ascending) from history kap_n; writes sig and, with
+    want_A, A = d sig / d s_tr (3 x 3); returns (plastic, d eps_d^p, d eps_v^p, opening), opening
     the part of d eps_v^p from the apex and the tension cut-off (the material separating).
     W (22 x 3) and M (3 x 4) are work arrays."""
     phi, dphi = _soft(par[0], par[1], par[4], kap_n)
@@ -243,7 +244,7 @@ def _mc_return(s_tr, kap_n, lam, mu, par, spsi, st, sig, A, W, M):
         if fm > tol:
             continue
         # A = I + D B J^-1 A^T
-        for j in range(3):
+        for j in range(3 if want_A else 0):
             for q in range(m):
                 col[q] = Amat[j, q]
             _solve_small(J, col, m, X, M)       # X = J^-1 A^T e_j
@@ -374,6 +375,8 @@ def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl,
     W = np.empty((22, 3))
     M = np.empty((3, 4))
     w0 = np.empty(3)
+    w = np.empty(3)
+    V = np.empty((3, 3))
     for q in range(lo, hi):
         p = idx[q]
         close = 0.0
@@ -387,8 +390,9 @@ def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl,
                 for j in range(3):
                     sigma_new[p, i, j] = S[i, j]
             continue
-        w, V = np.linalg.eigh(S)
-        plastic, dk, dv, opening = _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M)
+        eigh3(S, w, V)
+        plastic, dk, dv, opening = _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M,
+                                              False)
         if not plastic:
             for i in range(3):
                 for j in range(3):
@@ -430,6 +434,7 @@ def _mc_tangent(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf,
     W = np.empty((22, 3))
     M = np.empty((3, 4))
     w0 = np.empty(3)
+    w = np.empty(3)
     V = np.eye(3)
     for q in range(lo, hi):
         p = idx[q]
@@ -437,7 +442,7 @@ def _mc_tangent(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf,
         kap, pp = _frozen(state, p, nl, mf, par, pf)
         elastic = _clearly_elastic(S, kap, pp, st, w0)
         if not elastic:
-            w, V = np.linalg.eigh(S)
+            eigh3(S, w, V)
             _mc_return(w, kap, lam, mu, pp, spsi, st, sig, A, W, M)
             scale = max(abs(w[0]), abs(w[2]), 1e-300)
             for i in range(3):
