@@ -97,7 +97,6 @@ def _bspline(D, x, origin, spacing, ncells, ilo, nlat, table, p0, p1,
     Sk = np.empty((d, NS))
     dSk = np.empty((d, NS))
     off = np.empty((d, NS), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
-    idx = np.empty(d, dtype=np.int64)
     S = np.empty(NS)
     dS = np.empty(NS)
     bad = -1
@@ -112,7 +111,7 @@ def _bspline(D, x, origin, spacing, ncells, ilo, nlat, table, p0, p1,
                 Sk[k, q] = S[q]
                 dSk[k, q] = dS[q]
             stride *= nlat[k]
-        if tensor_product(d, NS, Sk, dSk, off, idx, table, p, True,
+        if tensor_product(d, NS, Sk, dSk, off, table, p, True,
                           nodes_out, N_out, dN_out, count_out):
             bad = p
     return bad

@@ -65,107 +65,53 @@ def weight_1d(xp, lp, xi_node, L, lo, hi):
 
 
 @njit(cache=True)
-def _some_gradient(d, dSk, Sk, idx):
-    """Whether a tensor-product node of weight 0 has a nonzero gradient component."""
-    for k in range(d):
-        g = dSk[k, idx[k]]
-        for l in range(d):
-            if l != k:
-                g *= Sk[l, idx[l]]
-        if g != 0.0:
-            return True
-    return False
-
-
-@njit(cache=True)
-def tensor_product(d, ns, Sk, dSk, off, idx, table, p, keep_gradients,
-                   nodes_out, N_out, dN_out, count_out):
-    """Write particle p's tensor-product weights into row p of the outputs (shared by the
-    lattice families: gimp, bspline). Sk/dSk (d, ns): the 1D weights and their derivatives of
-    the ns lattice nodes looked at per axis; off (d, ns): their flat lattice offsets (-1:
-    outside the local lattice); idx (d,): scratch. A node of weight 0 is skipped (and kept
-    as padding), unless `keep_gradients` and one of its gradient factors is not 0 (a node
-    whose 1D weight vanishes at the particle with a nonzero slope, e.g. the boundary-modified
-    B-spline at the grid boundary). Nonzero-weight nodes first (count_out[p] of them, only
-    the first nodes_out.shape[1] written), then padding (a valid node with N = dN = 0).
-    Returns True when a node of nonzero weight is not a local node."""
-    if not keep_gradients:
-        return _tensor_product_23(d, ns, Sk, dSk, off, table, p, nodes_out, N_out, dN_out,
-                                  count_out)
-    nv = nodes_out.shape[1]
-    bad = False
-    cnt = 0
-    pad = -1
-    total = 1
-    for k in range(d):
-        total *= ns
-        idx[k] = 0
-    for m in range(total):
-        if m > 0:                       # next multi-index, axis 0 fastest (no divisions)
-            k = 0
-            idx[0] += 1
-            while idx[k] == ns:
-                idx[k] = 0
-                k += 1
-                idx[k] += 1
-        w = 1.0
-        flat = 0
-        node = -1
-        inside = True
-        for k in range(d):
-            w *= Sk[k, idx[k]]
-            o = off[k, idx[k]]
-            if o < 0:
-                inside = False
-            flat += o
-        if inside:
-            node = table[flat]
-        if w == 0.0 and not (keep_gradients and _some_gradient(d, dSk, Sk, idx)):
-            if node >= 0 and pad < 0:
-                pad = node
-            continue
-        if node < 0:
-            bad = True
-            continue
-        if cnt < nv:
-            nodes_out[p, cnt] = node
-            N_out[p, cnt] = w
-            for k in range(d):
-                g = dSk[k, idx[k]]
-                for l in range(d):
-                    if l != k:
-                        g *= Sk[l, idx[l]]
-                dN_out[p, cnt, k] = g
-        cnt += 1
+def _pad(d, p, cnt, pad, nodes_out, N_out, dN_out, count_out):
+    """Close particle p's row after its cnt nonzero-weight nodes: count_out[p] = cnt, the
+    remaining columns a valid node (`pad`, a zero-weight node seen, else the first node) with
+    N = dN = 0."""
     count_out[p] = cnt
     if pad < 0 and cnt > 0:
         pad = nodes_out[p, 0]
-    for a in range(cnt, nv):
+    for a in range(cnt, nodes_out.shape[1]):
         nodes_out[p, a] = pad
         N_out[p, a] = 0.0
         for k in range(d):
             dN_out[p, a, k] = 0.0
-    return bad
 
 
 @njit(cache=True)
-def _tensor_product_23(d, ns, Sk, dSk, off, table, p, nodes_out, N_out, dN_out, count_out):
-    """tensor_product without keep_gradients, as three nested loops (2D: one z node of weight
-    1): the same nodes, in the same order, and the same products, without the multi-index
-    bookkeeping (about 1.6x faster)."""
+def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
+                   nodes_out, N_out, dN_out, count_out):
+    """Write particle p's tensor-product weights into row p of the outputs (shared by the
+    lattice families: gimp, bspline; d = 1, 2 or 3). Sk/dSk (d, ns): the 1D weights and their
+    derivatives of the ns lattice nodes looked at per axis; off (d, ns): their flat lattice
+    offsets (-1: outside the local lattice). Node (a, b, c) has the weight Sx_a Sy_b Sz_c and
+    the gradient (dSx_a Sy_b Sz_c, dSy_b Sx_a Sz_c, dSz_c Sx_a Sy_b) (missing axes: factor 1),
+    in nested loops, axis 0 fastest. A node of weight 0 is skipped (and kept as padding),
+    unless `keep_gradients` and one of its gradient components is not 0 (a node whose 1D
+    weight vanishes at the particle with a nonzero slope, e.g. the boundary-modified B-spline
+    at the grid boundary). Nonzero-weight nodes first (count_out[p] of them, only the first
+    nodes_out.shape[1] written), then padding (_pad). Returns True when a node of nonzero
+    weight is not a local node."""
     nv = nodes_out.shape[1]
     bad = False
     cnt = 0
     pad = -1
     for c in range(ns if d == 3 else 1):
         Sz = Sk[2, c] if d == 3 else 1.0
+        dSz = dSk[2, c] if d == 3 else 0.0
         oz = off[2, c] if d == 3 else 0
-        for b in range(ns):
-            oyz = off[1, b] + oz if off[1, b] >= 0 and oz >= 0 else -1
+        for b in range(ns if d >= 2 else 1):
+            Sy = Sk[1, b] if d >= 2 else 1.0
+            dSy = dSk[1, b] if d >= 2 else 0.0
+            oy = off[1, b] if d >= 2 else 0
+            oyz = oy + oz if oy >= 0 and oz >= 0 else -1
             for a in range(ns):
-                w = Sk[0, a] * Sk[1, b] * Sz        # the generic code's order of products
+                w = Sk[0, a] * Sy * Sz
                 node = table[off[0, a] + oyz] if off[0, a] >= 0 and oyz >= 0 else -1
-                if w == 0.0:
+                if w == 0.0 and not (keep_gradients and (dSk[0, a] * Sy * Sz != 0.0 or
+                                                         dSy * Sk[0, a] * Sz != 0.0 or
+                                                         dSz * Sk[0, a] * Sy != 0.0)):
                     if node >= 0 and pad < 0:
                         pad = node
                     continue
@@ -175,19 +121,13 @@ def _tensor_product_23(d, ns, Sk, dSk, off, table, p, nodes_out, N_out, dN_out, 
                 if cnt < nv:
                     nodes_out[p, cnt] = node
                     N_out[p, cnt] = w
-                    dN_out[p, cnt, 0] = dSk[0, a] * Sk[1, b] * Sz
-                    dN_out[p, cnt, 1] = dSk[1, b] * Sk[0, a] * Sz
+                    dN_out[p, cnt, 0] = dSk[0, a] * Sy * Sz
+                    if d >= 2:
+                        dN_out[p, cnt, 1] = dSy * Sk[0, a] * Sz
                     if d == 3:
-                        dN_out[p, cnt, 2] = dSk[2, c] * Sk[0, a] * Sk[1, b]
+                        dN_out[p, cnt, 2] = dSz * Sk[0, a] * Sy
                 cnt += 1
-    count_out[p] = cnt
-    if pad < 0 and cnt > 0:
-        pad = nodes_out[p, 0]
-    for a in range(cnt, nv):
-        nodes_out[p, a] = pad
-        N_out[p, a] = 0.0
-        for k in range(d):
-            dN_out[p, a, k] = 0.0
+    _pad(d, p, cnt, pad, nodes_out, N_out, dN_out, count_out)
     return bad
 
 
@@ -198,7 +138,6 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
     Sk = np.empty((d, ns))
     dSk = np.empty((d, ns))
     off = np.empty((d, ns), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
-    idx = np.empty(d, dtype=np.int64)
     bad = -1
     for p in range(p0, p1):
         stride = 1
@@ -214,7 +153,7 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
                 Sk[k, q] = S
                 dSk[k, q] = dS
             stride *= nlat[k]
-        if tensor_product(d, ns, Sk, dSk, off, idx, table, p, False,
+        if tensor_product(d, ns, Sk, dSk, off, table, p, False,
                           nodes_out, N_out, dN_out, count_out):
             bad = p
     return bad
