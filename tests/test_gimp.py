@@ -188,3 +188,48 @@ def test_refusals():
     tp = fm.Particles.fill(tri, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2)
     with pytest.raises(ValueError, match="structured grid"):
         fm.Simulation(tri, tp, fm.Explicit(), dt=1e-5, shape="ugimp")
+
+
+@pytest.mark.parametrize("d", [1, 2, 3])
+@pytest.mark.parametrize("keep", [False, True])
+def test_tensor_product_against_numpy_outer_products(d, keep):
+    """shapes.gimp.tensor_product (the lattice families' weights, axis 0 fastest) against numpy
+    outer products: the nonzero-weight nodes in order (with keep, also the zero-weight nodes
+    with a nonzero gradient), their weights and gradients to the bit, padding with N = dN = 0,
+    and the flag for a weighted node that is not local."""
+    from fenicsmpm.shapes.gimp import tensor_product
+    rng = np.random.default_rng(11 + d)
+    ns = 3
+    for trial in range(50):
+        Sk = rng.random((d, ns))
+        Sk[rng.random((d, ns)) < 0.3] = 0.0
+        dSk = rng.standard_normal((d, ns))
+        dSk[rng.random((d, ns)) < 0.3] = 0.0
+        strides = 4 ** np.arange(d)
+        off = np.where(rng.random((d, ns)) < 0.9, rng.integers(0, 4, (d, ns)) * strides[:, None], -1)
+        table = rng.integers(-1, 1000, 4 ** d).astype(np.int32)
+        ref = []                           # (node or -1, w, grad) per lattice node, axis 0 fastest
+        for m in np.ndindex(*(ns,) * d):
+            q = m[::-1]                    # q[k]: index along axis k
+            w, g = 1.0, [dSk[k, q[k]] for k in range(d)]     # products from the left
+            for k in range(d):
+                w *= Sk[k, q[k]]
+                for l in range(d):
+                    if l != k:
+                        g[l] *= Sk[k, q[k]]
+            inside = all(off[k, q[k]] >= 0 for k in range(d))
+            node = table[sum(off[k, q[k]] for k in range(d))] if inside else -1
+            if w != 0.0 or (keep and any(gk != 0.0 for gk in g)):
+                ref.append((node, w, g))
+        nv = ns ** d
+        nodes, N = np.zeros((1, nv), np.int32), np.zeros((1, nv))
+        dN, cnt = np.zeros((1, nv, d)), np.zeros(1, np.int64)
+        bad = tensor_product(d, ns, Sk, dSk, off, table, 0, keep, nodes, N, dN, cnt)
+        local = [r for r in ref if r[0] >= 0]
+        assert bad == (len(local) < len(ref))
+        assert cnt[0] == len(local)
+        for a, (node, w, g) in enumerate(local):
+            assert nodes[0, a] == node
+            assert N[0, a] == w
+            assert np.all(dN[0, a] == np.array(g))
+        assert np.all(N[0, len(local):] == 0.0) and np.all(dN[0, len(local):] == 0.0)
