@@ -165,3 +165,35 @@ def test_parallel_matches_serial():
     assert np.allclose(X0[a], Xs[b], rtol=0, atol=1e-9)
     diff = np.abs(syy[a] - ss[b]).max() / (RHO * G * H)
     assert diff < 1e-9, f"parallel and serial sigma_yy differ by {diff:.2e} rho g H (tol 1e-9)"
+
+
+def test_combine_into_fewer_columns_than_the_corners_reach():
+    """cpdi_combine into the last step's column count (shapes.gimp.PaddedStencil): with enough
+    columns the same rows as at full width, to the bit; with too few, a count above the
+    columns, so the caller evaluates again at full width."""
+    from fenicsmpm.shapes.cpdi import cpdi_combine
+    rng = np.random.default_rng(5)
+    n, ncor, nvc = 200, 4, 4
+    cnodes = rng.integers(0, 12, (n, ncor, nvc)).astype(np.int32)
+    cN = rng.random((n, ncor, nvc))
+    cN[rng.random((n, ncor, nvc)) < 0.2] = 0.0
+    w, g = rng.random((n, ncor)) + 0.1, rng.standard_normal((n, ncor, 2))
+
+    def combine(cols):
+        out = (np.empty((n, cols), np.int32), np.empty((n, cols)), np.empty((n, cols, 2)),
+               np.empty(n, np.int64))
+        cpdi_combine((0, 1), cnodes, cN, w, g, *out)
+        return out
+
+    full = combine(ncor * nvc)
+    nv = int(full[3].max())
+    cut = combine(nv)
+    assert np.array_equal(cut[3], full[3])
+    for a, b in zip(cut[:3], full[:3]):
+        assert np.array_equal(a, b[:, :nv])
+    few = combine(nv - 2)
+    over = full[3] > nv - 2
+    assert over.any() and np.all(few[3][over] > nv - 2)
+    assert np.array_equal(few[3][~over], full[3][~over])
+    for a, b in zip(few[:3], full[:3]):
+        assert np.array_equal(a[~over], b[~over, :nv - 2])

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..kernels.threads import PRANGE, chunk, particle_chunks
+from .gimp import PaddedStencil
 
 N_CORNERS = 4
 _GP = (0.5 - 0.5 / np.sqrt(3.0), 0.5 + 0.5 / np.sqrt(3.0))
@@ -411,16 +412,18 @@ def _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, 
                     continue
                 i = cnodes[p, c, a]
                 slot = cnt
-                for b in range(cnt):
+                for b in range(min(cnt, nv)):
                     if nodes_out[p, b] == i:
                         slot = b
                         break
                 if slot == cnt:
-                    nodes_out[p, cnt] = i
-                    N_out[p, cnt] = 0.0
-                    for k in range(d):
-                        dN_out[p, cnt, k] = 0.0
                     cnt += 1
+                    if slot >= nv:      # no column left: counted only (evaluated again wider)
+                        continue
+                    nodes_out[p, slot] = i
+                    N_out[p, slot] = 0.0
+                    for k in range(d):
+                        dN_out[p, slot, k] = 0.0
                 N_out[p, slot] += w[p, c] * s / V
                 for k in range(d):
                     dN_out[p, slot, k] += g[p, c, k] * s / V
@@ -438,7 +441,9 @@ def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
 
     cnodes, cN: (n, nc, nvc) grid nodes and standard shape values at each of the nc corners
     (4 in 2D, 8 in 3D); w (n, nc), g (n, nc, gdim) from corner_weights/corner_weights3. Nodes shared by several corners are merged: each node
-    appears once (count_out[p] of them), then padding (a valid node with N = dN = 0)."""
+    appears once (count_out[p] of them), then padding (a valid node with N = dN = 0); a
+    particle with more nodes than the outputs have columns gets only the first ones written
+    and a count above the columns (the caller evaluates again with all ncor nvc columns)."""
     n = cnodes.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
@@ -497,7 +502,7 @@ def initial_edges(grid, particles):
     return r0
 
 
-class CpdiShape:
+class CpdiShape(PaddedStencil):
     """CPDI1 (version 1) or CPDI2 (version 2) for a 2D or 3D Simulation: parallelogram /
     parallelepiped domains (CPDI1), quadrilateral / hexahedral domains (CPDI2); on triangle and
     tetrahedron meshes triangular / tetrahedral domains (the sub-simplices of
@@ -531,6 +536,7 @@ class CpdiShape:
         if self.version == 2 and not hasattr(p, "cpdi_corners"):
             self._cpdi1_corners(p, p.add_field("cpdi_corners", (self.n_corners, d)))
         self._corner_shape = None
+        self._init_buffers()
 
     def _cpdi1_corners(self, p, out):
         if self.simplex:
@@ -572,14 +578,13 @@ class CpdiShape:
             raise RuntimeError(f"CPDI: the domain of particle {int(p.id[bad])} at "
                                f"{np.round(p.x[bad], 6).tolist()} has turned inside out "
                                f"({'area' if d == 2 else 'volume'} {w[bad].sum():.3g})")
-        width = ncor * nvc
-        nodes = np.empty((n, width), dtype=np.int32)
-        N = np.empty((n, width))
-        dN = np.empty((n, width, d))
-        count = np.empty(n, dtype=np.int64)
-        cpdi_combine(g.D, cnodes, cN, w, gc, nodes, N, dN, count)
         self._corner_shape = (cnodes, cN)
-        return trim_stencil(nodes, N, dN, count)
+
+        def combine(nodes, N, dN, count):
+            cpdi_combine(g.D, cnodes, cN, w, gc, nodes, N, dN, count)
+            return -1
+
+        return self._fill(n, d, ncor * nvc, combine)[0]
 
 
 def shape_at_points(g, points, cells_hint):

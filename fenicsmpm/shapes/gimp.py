@@ -246,18 +246,46 @@ def initial_half_widths(grid, particles, lat):
     return np.ascontiguousarray(0.5 * s[:, None] * L[None, :])
 
 
-class LatticeShape:
-    """Shared driver of the lattice families (GimpShape, bspline.BsplineShape): the output
-    buffers, kept between steps with the last step's node columns, and the wider evaluation
-    when a particle touches more nodes than that. Subclasses set `name` and define
-    _window(sim) -> ns (lattice nodes looked at per axis) and
-    _kernel(sim, ns, nodes, N, dN, count) -> -1 or the index of a particle reaching a node
-    that is not local."""
-    name = "lattice"
+class PaddedStencil:
+    """Output buffers (nodes, N, dN, count) of a wide shape family, kept between steps with
+    the last step's node columns: a family whose particles touch a varying number of nodes
+    (GIMP, B-splines, CPDI) writes its padded rows into them without a fresh allocation or a
+    compacting copy per step, and evaluates again at full width when a particle touches more
+    nodes than last step."""
 
     def _init_buffers(self):
         self._buf = None
         self._nv = 0            # the node columns of the last evaluation (0: none yet)
+
+    def _fill(self, n, d, width, kernel):
+        """kernel(nodes, N, dN, count) -> bad writes n padded rows (at most nodes.shape[1]
+        nodes each, count[p] = how many particle p has); columns: the last step's node count
+        (usually still right), at most `width`. Returns ((nodes, N, dN) cut to the largest
+        count, bad)."""
+        cap = min(self._nv, width) if self._nv else width
+        for _ in range(2):
+            if self._buf is None or self._buf[0].shape != (n, cap):
+                self._buf = (np.empty((n, cap), dtype=np.int32), np.empty((n, cap)),
+                             np.empty((n, cap, d)), np.empty(n, dtype=np.int64))
+            nodes, N, dN, count = self._buf
+            bad = kernel(nodes, N, dN, count)
+            nv = max(int(count.max()) if n else 1, 1)
+            if nv <= cap:
+                break
+            cap = width                  # a particle touches more nodes than last step
+        self._nv = nv
+        if nv == cap:
+            return (nodes, N, dN), bad
+        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
+                np.ascontiguousarray(dN[:, :nv])), bad
+
+
+class LatticeShape(PaddedStencil):
+    """Shared driver of the lattice families (GimpShape, bspline.BsplineShape). Subclasses set
+    `name` and define _window(sim) -> ns (lattice nodes looked at per axis) and
+    _kernel(sim, ns, nodes, N, dN, count) -> -1 or the index of a particle reaching a node
+    that is not local."""
+    name = "lattice"
 
     def before_locate(self, sim):
         """Nothing to move: the weights follow x_p (and F for cpGIMP)."""
@@ -266,30 +294,15 @@ class LatticeShape:
         """(nodes, N, dN) of the local particles, nv = the largest number of nodes a particle
         touches (padded)."""
         p, d = sim.particles, sim.gdim
-        n = len(p)
         ns = self._window(sim)
-        width = ns ** d
-        # columns: the last step's node count (usually still right: no copy), at most width
-        cap = min(self._nv, width) if self._nv else width
-        for _ in range(2):
-            if self._buf is None or self._buf[0].shape != (n, cap):
-                self._buf = (np.empty((n, cap), dtype=np.int32), np.empty((n, cap)),
-                             np.empty((n, cap, d)), np.empty(n, dtype=np.int64))
-            nodes, N, dN, count = self._buf
-            bad = self._kernel(sim, ns, nodes, N, dN, count)
-            nv = max(int(count.max()) if n else 1, 1)
-            if nv <= cap:
-                break
-            cap = width                  # a particle touches more nodes than last step
+        out, bad = self._fill(len(p), d, ns ** d,
+                              lambda nodes, N, dN, count: self._kernel(sim, ns, nodes, N, dN,
+                                                                       count))
         if bad >= 0:
             raise RuntimeError(f"{self.name}: the domain of particle {int(p.id[bad])} at "
                                f"{np.round(p.x[bad], 6).tolist()} reaches grid nodes that are "
                                f"not on this rank; " + _RING_MESSAGE.format(name=self.name))
-        self._nv = nv
-        if nv == cap:
-            return nodes, N, dN
-        return (np.ascontiguousarray(nodes[:, :nv]), np.ascontiguousarray(N[:, :nv]),
-                np.ascontiguousarray(dN[:, :nv]))
+        return out
 
 
 class GimpShape(LatticeShape):
