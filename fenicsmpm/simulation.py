@@ -585,9 +585,12 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             output.open(self)
             if self.step_count == 0:
                 output.write(self)
+        def done(k):          # t_end reached (dt follows the state), or the step count
+            return self.t >= t_end - 1e-9 * self.dt if follow else k >= steps
+
         try:
             k = 0
-            while (self.t < t_end - 1e-9 * self.dt) if follow else (k < steps):
+            while not done(k):
                 try:
                     self.step()
                 except (RuntimeError, FloatingPointError) as err:
@@ -595,8 +598,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                         self._save_last_state(output, checkpoint)
                     raise
                 k += 1
-                last = not (self.t < t_end - 1e-9 * self.dt) if follow else k == steps
-                bar.update(min(k, steps - 1) if follow and not last else k, self.t)
+                last = done(k)
+                # with dt following the state the count is an estimate: full at the end only
+                bar.update(k if last else min(k, steps - 1), self.t)
                 if output is not None and self.step_count % output.every == 0:
                     output.write(self)
                 if checkpoint is not None and (self.step_count % checkpoint_every == 0 or last):
