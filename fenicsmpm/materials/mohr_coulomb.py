@@ -155,6 +155,11 @@ def _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl, Amat, B
         for i in range(3):
             Bmat[i, q] = b[i]
     kappa = kap_n
+    soft = par[4] != 0.0            # without softening the strength is that of any kappa
+    phi, dphi = _soft(par[0], par[1], par[4], kappa)
+    c, dc = _soft(par[2], par[3], par[4], kappa)
+    sphi = math.sin(phi)
+    cphi = math.cos(phi)
     for it in range(60):
         for i in range(3):
             ep[i] = 0.0
@@ -163,10 +168,11 @@ def _solve_set(sid, s_tr, kap_n, lam, mu, par, spsi, st, scale, sig, dl, Amat, B
         em = (ep[0] + ep[1] + ep[2]) / 3.0
         nd = math.sqrt((ep[0] - em) ** 2 + (ep[1] - em) ** 2 + (ep[2] - em) ** 2)
         kappa = kap_n + _SQ23 * nd
-        phi, dphi = _soft(par[0], par[1], par[4], kappa)
-        c, dc = _soft(par[2], par[3], par[4], kappa)
-        sphi = math.sin(phi)
-        cphi = math.cos(phi)
+        if soft:
+            phi, dphi = _soft(par[0], par[1], par[4], kappa)
+            c, dc = _soft(par[2], par[3], par[4], kappa)
+            sphi = math.sin(phi)
+            cphi = math.cos(phi)
         tr = ep[0] + ep[1] + ep[2]
         for i in range(3):
             sig[i] = s_tr[i] - lam * tr - 2.0 * mu * ep[i]
