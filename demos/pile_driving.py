@@ -33,7 +33,9 @@ peak vertical contact force of each blow, times 2 pi (split into "tip" = contact
 the tip particle + h/2 and "shaft" = the others: at h >= 0.15 m the pile is at most one cell
 wide, so the split is rough), and the void ratio near the tip after the blows (seed Fig 4.7:
 down to 0.35; note that e_d(p) >= 0.42 up to p = 10 MPa, so e = 0.35 lies outside the
-model's admissible range at any stress the pile produces).
+model's admissible range at any stress the pile produces). The PNG shows the void ratio
+near the pile as a raster (fenicsmpm.io.particle_raster: the soil's mean e per square of 1.5
+particle spacings, the pile's squares in black).
 
 Measured (serial, 2026-12-01, load average 2-6 on 2 cores):
   python3 demos/pile_driving.py   (h = 0.15 m, 8911 particles, K0 start, 0.2 s settling,
@@ -87,6 +89,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
+from fenicsmpm.io import particle_raster
 from fenicsmpm.materials.hypoplastic import geostatic
 
 comm = MPI.COMM_WORLD
@@ -227,6 +230,8 @@ def main(argv=None):
     t_b = sim.t
     on = hammer(t_b, period)
     rs = np.unique(np.round(p.x[p.head > 0, 0], 9))
+    # the radii of the head row: a few values (one per particle column of the pile, bounded
+    # by that row, not by the particle count), so every rank may hold them all
     rs = np.unique(np.concatenate(comm.allgather(rs)))
     edges = np.concatenate([[0.0], 0.5 * (rs[1:] + rs[:-1]), [R_PILE]])
     for k, r in enumerate(rs):      # one load per radial column: q on its annulus, per radian
@@ -277,9 +282,13 @@ def main(argv=None):
                finite=bool(comm.allreduce(bool(finite), op=MPI.LAND)),
                projections=int(_gsum(soil.stats[1])),
                history=ht.tolist())
-    keep = (p.x[:, 0] < 2.0) & (p.x[:, 1] > H_SOIL - 4.0)
-    loc = np.column_stack([p.x[keep], p.state[keep, 0], p.material_id[keep]])
-    allp = comm.gather(loc, root=0)
+    # the void ratio near the pile for the plot: rasters of squares of 1.5 particle spacings
+    # (the soil's mean e, the pile's cells in black)
+    bounds = ((0.0, 2.0), (H_SOIL - 4.0, H_SOIL + 1.0))
+    shape = tuple(int(round((b[1] - b[0]) / (1.5 * h / args.per_cell))) for b in bounds)
+    on_soil = p.material_id == SOIL
+    e_r = particle_raster(comm, p.x[on_soil], p.state[on_soil, 0], bounds, shape)
+    pile_r = particle_raster(comm, p.x[~on_soil], None, bounds, shape, reduce="count")
     if comm.rank != 0:
         return res
     print(f"pile driving (h = {h:g} m, {res['n_particles']} particles, {start} start, "
@@ -320,10 +329,10 @@ def main(argv=None):
     ax[1].set_ylabel("vertical contact force on the pile [kN]")
     ax[1].legend()
     ax[1].set_title("soil resistance")
-    a = np.concatenate(allp)
-    s = a[:, 3] == SOIL
-    sc = ax[2].scatter(a[s, 0], a[s, 1], c=a[s, 2], s=4, cmap="jet_r", vmin=0.35, vmax=0.75)
-    ax[2].scatter(a[~s, 0], a[~s, 1], c="k", s=4)
+    extent = (*bounds[0], *bounds[1])
+    sc = ax[2].imshow(e_r.T, origin="lower", extent=extent, cmap="jet_r", vmin=0.35, vmax=0.75)
+    ax[2].imshow(np.where(pile_r > 0, 0.0, np.nan).T, origin="lower", extent=extent,
+                 cmap="gray", vmin=0.0, vmax=1.0)
     ax[2].set_xlim(0, 2.0)
     ax[2].set_ylim(H_SOIL - 4.0, H_SOIL + 1.0)
     ax[2].set_aspect("equal")

@@ -38,7 +38,8 @@ the multi-velocity contact forces at its nodes) under-resolves the tip; treat it
 qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle at r = 3.85 m
 was thrown out of the mesh.
 Writes DIR/pile_jacking.png: resistance vs penetration, penetration vs time, and the final
-vertical stress field (sigma_zz) with the pile.
+vertical stress field (sigma_zz) with the pile, as rasters of squares of 3h/4 near the pile
+(fenicsmpm.io.particle_raster: the soil's mean sigma_zz, the pile's cells in black).
 """
 import argparse
 import json
@@ -51,6 +52,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
+from fenicsmpm.io import particle_raster
 from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
@@ -141,10 +143,13 @@ def main(argv=None):
                n_particles=p.n_global(), penetration=depth, resistance=float(np.mean(F[-5:])),
                shaft_estimate=shaft, tip_estimate=tip, sigma_v_base=sv,
                sigma_v_base_exact=-RHO * G * (H_SOIL - 0.25 * h), sigma_zz_below_tip=szz_tip)
-    # the final stress field for the plot: only the plotted window near the pile goes to rank 0
-    keep = (p.x[:, 0] < PLOT_R) & (p.x[:, 1] > PLOT_Z[0]) & (p.x[:, 1] < PLOT_Z[1])
-    loc = np.column_stack([p.x[keep], p.stress[keep, 1, 1], p.material_id[keep]])
-    allp = comm.gather(loc, root=0)
+    # the final stress field for the plot: rasters of the window near the pile (2 x 2
+    # particles per cell: squares of 3h/4 hold one or more particles)
+    bounds = ((0.0, PLOT_R), PLOT_Z)
+    shape = tuple(int(round((b[1] - b[0]) / (0.75 * h))) for b in bounds)
+    on_soil = p.material_id == SOIL
+    szz = particle_raster(comm, p.x[on_soil], p.stress[on_soil, 1, 1], bounds, shape)
+    pile = particle_raster(comm, p.x[~on_soil], None, bounds, shape, reduce="count")
     if comm.rank != 0:
         return res
     print(f"pile jacking: penetration {depth:.3f} m in {t_end:g} s ({sim.step_count} steps, "
@@ -168,10 +173,10 @@ def main(argv=None):
     ax[1].set_xlabel("t [s]")
     ax[1].set_ylabel("penetration [m]")
     ax[1].set_title("penetration")
-    a = np.concatenate(allp)
-    s = a[:, 3] == 0
-    sc = ax[2].scatter(a[s, 0], a[s, 1], c=a[s, 2] / 1e3, s=2, cmap="viridis")
-    ax[2].scatter(a[~s, 0], a[~s, 1], c="k", s=2)
+    extent = (*bounds[0], *bounds[1])
+    sc = ax[2].imshow(szz.T / 1e3, origin="lower", extent=extent, cmap="viridis")
+    ax[2].imshow(np.where(pile > 0, 0.0, np.nan).T, origin="lower", extent=extent, cmap="gray",
+                 vmin=0.0, vmax=1.0)
     ax[2].set_xlim(0, PLOT_R)
     ax[2].set_ylim(*PLOT_Z)
     ax[2].set_aspect("equal")

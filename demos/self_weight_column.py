@@ -9,7 +9,8 @@ ramped over 10 quasi-static load steps (Newton + PETSc KSP). Exact (linear elast
 so the top settles rho g H^2 / (2 M). Particles are compared at their initial height y0.
 
 Writes to DIR (default results/self_weight_column/):
-    self_weight_column.png     sigma_yy(y0) and u_y(y0): particles vs exact
+    self_weight_column.png     sigma_yy(y0) and u_y(y0): the mean of each particle row
+                               (fenicsmpm.io.particle_profile) vs exact
     probe_top.csv              displacement and stress of the top particle per load step
     output/particles.pvd       particles (VTU) and output/grid.xdmf, for ParaView
 """
@@ -20,16 +21,16 @@ import numpy as np
 from mpi4py import MPI
 
 import fenicsmpm as fm
+from fenicsmpm.io import particle_profile
 from fenicsmpm.problems.elastic import self_weight_column
 
 comm = MPI.COMM_WORLD
 H = 10.0          # column height (the builder's default)
 
 
-def gather(*arrays):
-    """Concatenate per-rank particle arrays on rank 0 (None elsewhere)."""
-    parts = comm.gather(arrays, root=0)
-    return [np.concatenate(a) for a in zip(*parts)] if comm.rank == 0 else None
+def total(a):
+    """Sum over all particles of all ranks."""
+    return comm.allreduce(float(np.sum(a)))
 
 
 def plot(y0, syy, uy, exact, path):
@@ -40,11 +41,11 @@ def plot(y0, syy, uy, exact, path):
     y = np.linspace(0.0, H, 200)
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9, 5), sharey=True)
     ax1.plot(exact["stress_yy"](y) / 1e3, y, "k-", lw=1, label="exact")
-    ax1.plot(syy / 1e3, y0, "C0o", ms=4, label="particles")
+    ax1.plot(syy / 1e3, y0, "C0o", ms=4, label="particle rows")
     ax1.set_xlabel(r"$\sigma_{yy}$ [kPa]")
     ax1.set_ylabel("initial height y0 [m]")
     ax2.plot(exact["displacement_y"](y) * 1e3, y, "k-", lw=1, label="exact")
-    ax2.plot(uy * 1e3, y0, "C0o", ms=4, label="particles")
+    ax2.plot(uy * 1e3, y0, "C0o", ms=4, label="particle rows")
     ax2.set_xlabel(r"$u_y$ [mm]")
     for ax, where in ((ax1, "upper left"), (ax2, "lower left")):
         ax.grid(alpha=0.3)
@@ -72,27 +73,36 @@ def main(argv=None):
     sim.run(steps=load_steps, output=fm.Output(os.path.join(args.out, "output"), every=1))
 
     p = sim.particles
-    data = gather((p.x - p.u)[:, 1], p.stress[:, 1, 1], p.u[:, 1], p.V0)
+    y0, syy, uy, V0 = (p.x - p.u)[:, 1], p.stress[:, 1, 1], p.u[:, 1], p.V0
+    # Q1 elements give a constant stress per cell row, exact at the row centre. Mid-depth
+    # y = H/2 is a node, so interpolate linearly between the particle rows either side.
+    below = comm.allreduce(float(y0[y0 <= H / 2].max()) if np.any(y0 <= H / 2) else -np.inf,
+                           op=MPI.MAX)
+    above = comm.allreduce(float(y0[y0 > H / 2].min()) if np.any(y0 > H / 2) else np.inf,
+                           op=MPI.MIN)
+    s_rows = [total(syy[y0 == r]) / total(y0 == r) for r in (below, above)]
+    s_mid, s_mid_exact = np.interp(H / 2, [below, above], s_rows), exact["stress_yy"](H / 2)
+    # u_y is linear within the top cell: extrapolate its particles to the top, y = H (the
+    # least-squares line through them, from sums over the ranks).
+    top = y0 > H - h
+    n_top = total(top)
+    y_mean, u_mean = total(y0[top]) / n_top, total(uy[top]) / n_top
+    slope = total((y0[top] - y_mean) * (uy[top] - u_mean)) / total((y0[top] - y_mean) ** 2)
+    settlement = -(u_mean + slope * (H - y_mean))
+    # AMPLE's stress error norm (BENCHMARKS.md V2): sum |s_p - s(Y_p)| V0_p / (rho g H V0)
+    norm = total(np.abs(syy - exact["stress_yy"](y0)) * V0) / (-exact["stress_yy"](0.0) * total(V0))
+    # the plot: the mean of each particle row (per_cell = 2 rows per cell, bins centred on them)
+    n_rows = 2 * n_cells
+    rows = [particle_profile(comm, y0, f, (0.0, H), n_rows) for f in (syy, uy)]
     metrics = None
     if comm.rank == 0:
-        y0, syy, uy, V0 = data
-        # Q1 elements give a constant stress per cell row, exact at the row centre. Mid-depth
-        # y = H/2 is a node, so interpolate linearly between the particle rows either side.
-        rows = np.unique(y0)
-        s_rows = np.array([syy[y0 == r].mean() for r in rows])
-        s_mid, s_mid_exact = np.interp(H / 2, rows, s_rows), exact["stress_yy"](H / 2)
-        # u_y is linear within the top cell: extrapolate its particles to the top, y = H.
-        top = y0 > H - h
-        settlement = -np.polyval(np.polyfit(y0[top], uy[top], 1), H)
-        # AMPLE's stress error norm (BENCHMARKS.md V2): sum |s_p - s(Y_p)| V0_p / (rho g H V0)
-        norm = np.sum(np.abs(syy - exact["stress_yy"](y0)) * V0) / (-exact["stress_yy"](0.0) * V0.sum())
         metrics = dict(stress_mid=s_mid, stress_mid_exact=s_mid_exact,
                        stress_error=abs(s_mid - s_mid_exact) / abs(s_mid_exact),
                        settlement=settlement, settlement_exact=exact["top_settlement"],
                        settlement_error=abs(settlement / exact["top_settlement"] - 1.0),
                        stress_error_norm=norm, newton_iterations=list(integrator.iterations))
         png = os.path.join(args.out, "self_weight_column.png")
-        plot(y0, syy, uy, exact, png)
+        plot((np.arange(n_rows) + 0.5) * H / n_rows, *rows, exact, png)
         m = metrics
         print(f"\nSelf-weight column, {n_cells} cells, {load_steps} load steps, {comm.size} rank(s); "
               f"Newton iterations per step: {m['newton_iterations']}")

@@ -37,8 +37,9 @@ Printed and returned:
                   (F, failed, mean speed over the last quarter of the hold, crest |u|).
 
 Writes to DIR (default results/slope_failure/):
-    slope_failure.png   the unreduced slope's final state coloured by plastic deviatoric
-                        strain (MohrCoulomb state column 0) and the mean-speed histories of
+    slope_failure.png   the unreduced slope's final state: a raster of the mean plastic
+                        deviatoric strain (MohrCoulomb state column 0) per square of h / 2
+                        (fenicsmpm.io.particle_raster), and the mean-speed histories of
                         every run
 """
 import argparse
@@ -51,6 +52,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
+from fenicsmpm.io import particle_raster
 
 comm = MPI.COMM_WORLD
 RHO, E, NU, PSI = 2000.0, 40.0e6, 0.42, 0.0
@@ -108,12 +110,10 @@ def run_factor(factor, cells, t_ramp, t_hold, keep=False, fbar=False, shape="aut
                mean_speed_tail=v_tail, mean_speed_final=float(v[-1]), crest_u=u_crest,
                steps=sim.step_count, dt=sim.dt, n_particles=sim.particles.n_global(),
                wall_s=wall, t=t, v=v)
-    if keep:
+    if keep:       # the plastic strain raster (rank 0; None elsewhere): squares of h / 2
         p = sim.particles
-        parts = comm.gather((p.x, p.state[:, 0]), root=0)
-        if comm.rank == 0:
-            out["x"] = np.concatenate([a for a, _ in parts])
-            out["eps"] = np.concatenate([b for _, b in parts])
+        out["eps"] = particle_raster(comm, p.x, p.state[:, 0], ((0.0, L), (0.0, HEIGHT)),
+                                     (2 * cells[0], 2 * cells[1]))
     return out
 
 
@@ -122,9 +122,9 @@ def plot(base, runs, bracket, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 8), gridspec_kw=dict(height_ratios=(3, 2)))
-    x, eps = base["x"], base["eps"]
-    sc = ax1.scatter(x[:, 0], x[:, 1], c=eps, s=2, cmap="viridis", vmin=0.0,
-                     vmax=max(np.percentile(eps, 98), 1e-12))
+    eps = base["eps"]
+    sc = ax1.imshow(eps.T, origin="lower", extent=(0.0, L, 0.0, HEIGHT), cmap="viridis",
+                    vmin=0.0, vmax=max(np.nanpercentile(eps, 98), 1e-12))
     xs = np.linspace(0.0, L, 200)
     ax1.plot(xs, surface(xs), "k--", lw=0.8, label="initial surface")
     ax1.set_aspect("equal")
@@ -185,7 +185,7 @@ def main(argv=None):
         else:
             lo = mid
     wall = time.perf_counter() - t0
-    strip = lambda r: {k: v for k, v in r.items() if k not in ("t", "v", "x", "eps")}
+    strip = lambda r: {k: v for k, v in r.items() if k not in ("t", "v", "eps")}
     metrics = dict(cells=list(cells), t_ramp=t_ramp, t_hold=t_hold, u_fail=U_FAIL,
                    bracket=(lo, hi) if ok else None, bracket_valid=bool(ok),
                    unreduced=strip(base), runs=[strip(r) for r in runs],

@@ -34,8 +34,10 @@ Printed and returned (same dict on every rank):
   finite        whether every particle position and stress is finite at the end.
 
 Writes to DIR (default results/slope_gmsh/):
-    slope_gmsh.png     the mesh with the initial slope, and the final particles coloured by
-                       the plastic deviatoric strain (MohrCoulomb state column 0)
+    slope_gmsh.png     the mesh (read back from slope_gmsh.msh on rank 0) with the squares of
+                       h / 2.5 that hold particles at the start, and the final plastic
+                       deviatoric strain (MohrCoulomb state column 0) as a raster of the same
+                       squares (fenicsmpm.io.particle_raster: reduced over the ranks)
     slope_gmsh.msh     the gmsh mesh (open it with `gmsh slope_gmsh.msh`)
 """
 import argparse
@@ -46,6 +48,7 @@ import numpy as np
 from mpi4py import MPI
 
 import fenicsmpm as fm
+from fenicsmpm.io import particle_raster
 from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
@@ -129,16 +132,36 @@ def toe_front(p):
     return comm.allreduce(float(p.x[sel, 0].min()) if np.any(sel) else np.inf, op=MPI.MIN)
 
 
-def plot(msh_xy, cells, x0, x, eps, path):
+def mesh_triangles(path):
+    """The triangles of the .msh file: node coordinates (n, 2) and triangles (m, 3), for
+    triplot on rank 0. The file is rank 0's own (gmsh built the whole model there, see draw):
+    the mesh is read back, not gathered from the ranks."""
+    import gmsh
+    gmsh.initialize()
+    gmsh.option.setNumber("General.Terminal", 0)
+    gmsh.open(path)
+    tags, xyz, _ = gmsh.model.mesh.getNodes()
+    _, nodes = gmsh.model.mesh.getElementsByType(2)              # 3-node triangles
+    gmsh.finalize()
+    index = np.zeros(int(tags.max()) + 1, dtype=np.int64)
+    index[tags.astype(np.int64)] = np.arange(len(tags))
+    return xyz.reshape(-1, 3)[:, :2], index[nodes.astype(np.int64)].reshape(-1, 3)
+
+
+def plot(msh_xy, cells, start, eps, path):
+    """start: the particle count raster at t = 0, eps: the final plastic strain raster, both
+    over the domain."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 7))
-    ax1.triplot(msh_xy[:, 0], msh_xy[:, 1], cells, lw=0.4, color="0.6")
-    ax1.scatter(x0[:, 0], x0[:, 1], s=1, color="C1")
-    ax1.set_title("gmsh mesh (triangles) and the particles at t = 0", fontsize=10)
-    sc = ax2.scatter(x[:, 0], x[:, 1], c=eps, s=2, cmap="viridis", vmin=0.0,
-                     vmax=max(np.percentile(eps, 98), 1e-12))
+    extent = (0.0, L, 0.0, HEIGHT)
+    ax1.imshow(np.where(start > 0, 1.0, np.nan).T, origin="lower", extent=extent, cmap="Oranges",
+               vmin=0.0, vmax=2.0)
+    ax1.triplot(msh_xy[:, 0], msh_xy[:, 1], cells, lw=0.4, color="0.4")
+    ax1.set_title("gmsh mesh (triangles) and the squares holding particles at t = 0", fontsize=10)
+    sc = ax2.imshow(eps.T, origin="lower", extent=extent, cmap="viridis", vmin=0.0,
+                    vmax=max(np.nanpercentile(eps, 98), 1e-12))
     xs = np.linspace(0.0, L, 200)
     ax2.plot(xs, surface(xs), "k--", lw=0.8, label="initial surface")
     ax2.legend(loc="upper left", fontsize=8)
@@ -166,7 +189,9 @@ def main(argv=None):
     p = sim.particles
     mass0 = comm.allreduce(float(np.sum(p.mass)))
     n0 = p.n_global()
-    x_start = comm.gather(p.x.copy(), root=0)
+    bounds = ((0.0, L), (0.0, HEIGHT))                       # squares of h / 2.5
+    shape = (int(round(2.5 * L / h)), int(round(2.5 * HEIGHT / h)))
+    start = particle_raster(comm, p.x, None, bounds, shape, reduce="count")
     toe0 = toe_front(p)
     t0 = time.perf_counter()
     sim.run(t_end=t_end)
@@ -182,14 +207,9 @@ def main(argv=None):
              crest_drop=-float(d["displacement_y"][-1]), mass_initial=mass0,
              mass_final=mass1, finite=finite, wall_s=wall,
              png=os.path.join(args.out, "slope_gmsh.png"), msh=msh_path)
-    eps = comm.gather(p.state[:, 0].copy(), root=0)
-    x_end = comm.gather(p.x.copy(), root=0)
-    g = sim.grid
-    cells = comm.gather(g.node_x[g.cell_nodes[: g.n_owned_cells]][:, :, :2], root=0)
+    eps = particle_raster(comm, p.x, p.state[:, 0], bounds, shape)
     if comm.rank == 0:
-        tri = np.concatenate(cells)
-        plot(tri.reshape(-1, 2), np.arange(3 * len(tri)).reshape(-1, 3),
-             np.concatenate(x_start), np.concatenate(x_end), np.concatenate(eps), m["png"])
+        plot(*mesh_triangles(msh_path), start, eps, m["png"])
         print(f"\nSlope from gmsh: {m['n_cells']} triangles (h = {h:g} m), {n0} particles, "
               f"dt = {sim.dt:.3g} s, {m['steps']} explicit MUSL steps to t = {sim.t:.2f} s, "
               f"{comm.size} rank(s), {wall:.1f} s wall")

@@ -45,7 +45,7 @@ MODULES = [
     ("fenicsmpm.boundaries.friction", "Rough and frictional bases"),
     ("fenicsmpm.errors", "Exceptions"),
     ("fenicsmpm.io.compiler_log", "Form-compiler output"),
-    ("fenicsmpm.io", "Probe and output writers"),
+    ("fenicsmpm.io", "Probe, output writers and particle rasters"),
     ("fenicsmpm.bench", "Benchmark suite"),
     ("fenicsmpm.bench.common", "Benchmark JSON format and helpers"),
 ]
