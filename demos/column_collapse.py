@@ -52,7 +52,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.io import particle_raster
+from fenicsmpm.io import particle_raster, raster_shape
 from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
@@ -163,8 +163,7 @@ def main(argv=None):
     eps_max = comm.allreduce(float(p.state[:, 0].max()) if len(p) else -np.inf, op=MPI.MAX)
     bounds = ((-HALF_SPAN, HALF_SPAN), (0.0, H + 2 * h))          # the mesh; squares of ~3h/4
     eps = particle_raster(comm, p.x, p.state[:, 0], bounds,
-                          (int(round(2 * HALF_SPAN / (0.75 * h))),
-                           int(round((H + 2 * h) / (0.75 * h)))))
+                          raster_shape(bounds, 0.75 * h))
     metrics = dict(h=h, dt=dt, t_end=float(sim.t), steps=sim.step_count, n_particles=n0,
                    n_particles_final=p.n_global(), mass_initial=mass0, mass_final=mass1,
                    runout=0.5 * (runout_l + runout_r), runout_left=runout_l,

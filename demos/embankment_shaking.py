@@ -60,7 +60,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.io import particle_raster
+from fenicsmpm.io import particle_raster, raster_shape
 from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
@@ -265,7 +265,7 @@ def main(argv=None):
     static, final = crest(i_s), crest(len(t) - 1)
     mag = np.max(np.hypot(rows[:, 2::2], rows[:, 3::2]), axis=1)
     bounds = ((-L / 2, L / 2), (0.0, D + H_E + 1.0))
-    shape = tuple(int(round((b[1] - b[0]) / (0.75 * h))) for b in bounds)
+    shape = raster_shape(bounds, 0.75 * h)
     xp = np.column_stack([xwrap(p.x[:, 0]), p.x[:, 1]])
     emb = p.material_id == 1
     eps_r = particle_raster(comm, xp, p.state[:, 0], bounds, shape)

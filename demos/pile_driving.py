@@ -89,7 +89,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.io import particle_raster
+from fenicsmpm.io import particle_raster, raster_shape
 from fenicsmpm.materials.hypoplastic import geostatic
 
 comm = MPI.COMM_WORLD
@@ -285,7 +285,7 @@ def main(argv=None):
     # the void ratio near the pile for the plot: rasters of squares of 1.5 particle spacings
     # (the soil's mean e, the pile's cells in black)
     bounds = ((0.0, 2.0), (H_SOIL - 4.0, H_SOIL + 1.0))
-    shape = tuple(int(round((b[1] - b[0]) / (1.5 * h / args.per_cell))) for b in bounds)
+    shape = raster_shape(bounds, 1.5 * h / args.per_cell)
     on_soil = p.material_id == SOIL
     e_r = particle_raster(comm, p.x[on_soil], p.state[on_soil, 0], bounds, shape)
     pile_r = particle_raster(comm, p.x[~on_soil], None, bounds, shape, reduce="count")

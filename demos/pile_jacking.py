@@ -52,7 +52,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.io import particle_raster
+from fenicsmpm.io import particle_raster, raster_shape
 from fenicsmpm.materials.initial_stress import k0_stress
 
 comm = MPI.COMM_WORLD
@@ -146,7 +146,7 @@ def main(argv=None):
     # the final stress field for the plot: rasters of the window near the pile (2 x 2
     # particles per cell: squares of 3h/4 hold one or more particles)
     bounds = ((0.0, PLOT_R), PLOT_Z)
-    shape = tuple(int(round((b[1] - b[0]) / (0.75 * h))) for b in bounds)
+    shape = raster_shape(bounds, 0.75 * h)
     on_soil = p.material_id == SOIL
     szz = particle_raster(comm, p.x[on_soil], p.stress[on_soil, 1, 1], bounds, shape)
     pile = particle_raster(comm, p.x[~on_soil], None, bounds, shape, reduce="count")

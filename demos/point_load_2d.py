@@ -81,7 +81,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.io import particle_raster
+from fenicsmpm.io import particle_raster, raster_shape
 
 comm = MPI.COMM_WORLD
 BASES = ("fixed", "viscous", "viscoelastic")
@@ -155,7 +155,7 @@ def build(base, dx):
     # every rank holds the ids of this one particle row (they may migrate): bounded by the
     # row, not by the particle count
     ids = np.concatenate(comm.allgather(p.id[bottom_row]))
-    shape = tuple(int(round((b[1] - b[0]) / (0.75 * dx))) for b in PLOT)
+    shape = raster_shape(PLOT, 0.75 * dx)
 
     def observe(s):
         q = s.particles

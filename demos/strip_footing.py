@@ -73,7 +73,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.io import particle_raster
+from fenicsmpm.io import particle_raster, raster_shape
 
 comm = MPI.COMM_WORLD
 BASES = ("fixed", "viscous", "viscoelastic")
@@ -171,7 +171,7 @@ def run_base(base, dx, t_end, length=None):
     zone = eps > PLASTIC
     depth = comm.allreduce(float((H - x0[zone, 1]).max()) if np.any(zone) else 0.0, op=MPI.MAX)
     eps_r = particle_raster(comm, p.x, eps, PLOT,
-                            tuple(int(round((b[1] - b[0]) / (0.75 * dx))) for b in PLOT))
+                            raster_shape(PLOT, 0.75 * dx))
     res = dict(base=base, dx=dx, n_particles=p.n_global(), sigma_v_base=s_base,
                sigma_v_base_exact=-RHO * G * (H - 0.25 * dx), sigma_v_error=err_max,
                static_newton=static_newton, static_settlement=u_static,

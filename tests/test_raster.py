@@ -134,3 +134,10 @@ def test_a_length_mismatch_on_one_rank_raises_on_every_rank():
     with pytest.raises(ValueError, match="'values'"):
         particle_raster(comm, GOOD["x"], values, BOUNDS, (2, 2))
     comm.barrier()
+
+
+def test_raster_shape_counts_cells_of_the_given_size():
+    """raster_shape: cells of about `size` per axis, at least one."""
+    from fenicsmpm.io import raster_shape
+    assert raster_shape(((0.0, 3.0), (-1.0, 1.0)), 0.5) == (6, 4)
+    assert raster_shape(((0.0, 0.1), (0.0, 1.0)), 0.5) == (1, 2)

@@ -6,7 +6,7 @@ from .probe_writer import ProbeWriter, read_probe_csv
 from .progress import Progress
 from .probe import Probe
 from .output import Output
-from .raster import particle_raster, particle_profile
+from .raster import particle_raster, particle_profile, raster_shape
 
 __all__ = ["ParticleWriter", "ProbeWriter", "read_probe_csv", "Progress", "Probe", "Output",
-           "particle_raster", "particle_profile"]
+           "particle_raster", "particle_profile", "raster_shape"]

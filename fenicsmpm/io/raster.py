@@ -9,7 +9,7 @@ the number of particles: a plot never gathers the particles on one rank."""
 import numpy as np
 from mpi4py import MPI
 
-__all__ = ["particle_raster", "particle_profile"]
+__all__ = ["particle_raster", "particle_profile", "raster_shape"]
 
 REDUCE = ("mean", "max", "min", "count")
 
@@ -77,6 +77,12 @@ def _check_values(comm, values, n, reduce):
         raise ValueError(f"'values' must hold one value per particle ({n} here; None only with "
                          f"reduce='count'), got {got}" + ("" if bad else " on another rank"))
     return values
+
+
+def raster_shape(bounds, size):
+    """(nx, ny): the cell counts of a raster of `bounds` ((xmin, xmax), (ymin, ymax)) with
+    cells of about `size` on a side (at least one per axis), for particle_raster."""
+    return tuple(max(1, int(round((hi - lo) / size))) for lo, hi in bounds)
 
 
 def particle_raster(comm, x, values, bounds, shape, reduce="mean"):
