@@ -92,6 +92,46 @@ class SetupMixin:
         self.particle_loads.append((field, load))
         return n
 
+    def move_particles(self, region, displacement, components=None, penalty=100.0):
+        """Prescribe the displacement of the particles selected by region(x) now:
+        u_p = displacement(X, t) on `components` (default: all), X their positions now, a
+        function returning (n, gdim); implicit integrators only, enforced by penalty
+        (fenicsmpm.boundaries.particle_motion: springs of `penalty` times the particle's own
+        stiffness). A displacement-controlled rigid footing or plate that, unlike fixed mesh
+        nodes, moves with the material. Returns the constraint's index for
+        particle_reaction(). Collective."""
+        from .boundaries import particle_motion as pm
+        name = f"move_particles #{len(self.particle_motions)}"
+        if getattr(self.integrator, "explicit", True):
+            raise NotImplementedError(f"{name}: prescribed particle motion is enforced by the "
+                                      f"implicit integrators (fm.QuasiStatic, fm.Newmark); "
+                                      f"explicitly, use a rigid body (fm.ExplicitContact)")
+        if not callable(region) or not callable(displacement):
+            raise TypeError(f"{name}: 'region' and 'displacement' must be functions "
+                            f"region(x) -> bool and displacement(X, t) -> (n, gdim)")
+        if isinstance(penalty, bool) or not (isinstance(penalty, (int, float)) and penalty > 0):
+            raise ValueError(f"{name}: 'penalty' must be a number > 0, got {penalty!r}")
+        comps = list(range(self.gdim)) if components is None else list(components)
+        if not comps or any(c not in range(self.gdim) for c in comps):
+            raise ValueError(f"{name}: 'components' must be a non-empty subset of "
+                             f"{list(range(self.gdim))}, got {components!r}")
+        motion = pm.ParticleMotion(len(self.particle_motions), displacement, comps, penalty)
+        if pm.attach(self, motion, region) == 0:
+            raise ValueError(f"{name}: 'region' selects no particle")
+        self.particle_motions.append(motion)
+        return motion.index
+
+    def particle_reaction(self, index=0):
+        """The force (a gdim vector, per unit thickness in 2D) that prescribed particle motion
+        `index` (move_particles) exerted on the material in the last step, summed over ranks."""
+        if not 0 <= index < len(self.particle_motions):
+            raise ValueError(f"particle_reaction: no prescribed particle motion {index!r} "
+                             f"({len(self.particle_motions)} added with move_particles)")
+        r = self.particle_motions[index].reaction
+        if r is None:
+            raise ValueError("particle_reaction: no step has run yet")
+        return r
+
     def _particle_load_force(self, t, out):
         p = self.particles
         for name, load in self.particle_loads:

@@ -116,6 +116,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self._traction_forms = None
         self._warned_traction = False
         self.particle_loads = []
+        self.particle_motions = []
         self.frictions = []
         self.splitting = None
         self.boundaries = []

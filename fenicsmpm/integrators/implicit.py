@@ -31,6 +31,7 @@ import numpy as np
 
 from ..kernels import axisymmetric as axi
 from ..boundaries import particle_layer as kl
+from ..boundaries import particle_motion as pm
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
 from .linear_system import DEFAULT_PREFIX, LinearSystem, OutsidePattern, stencil_rings
@@ -44,7 +45,7 @@ class _Newton:
     reports_reaction = True             # sim.nodal["reaction"] after each step
 
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
-                 prefix=DEFAULT_PREFIX, line_search=0):
+                 prefix=DEFAULT_PREFIX, line_search=0, ghost=0.0, ghost_fill=0.9):
         for name, val in (("rtol", rtol), ("utol", utol)):
             if isinstance(val, bool) or not (isinstance(val, (int, float)) and val > 0):
                 raise ValueError(f"{type(self).__name__}: '{name}' must be > 0, got {val!r}")
@@ -60,6 +61,11 @@ class _Newton:
                              f"got {line_search!r}")
         self.rtol, self.utol, self.max_iter, self.flip = rtol, utol, max_iter, float(flip)
         self.line_search = line_search
+        for name, val in (("ghost", ghost), ("ghost_fill", ghost_fill)):
+            if isinstance(val, bool) or not (isinstance(val, (int, float)) and val >= 0):
+                raise ValueError(f"{type(self).__name__}: '{name}' must be a number >= 0, got {val!r}")
+        self.ghost, self.ghost_fill = float(ghost), float(ghost_fill)
+        self._ghost = None
         self.petsc_options, self.prefix = petsc_options, prefix
         self.system = None
         self.iterations = []     # Newton iterations per step
@@ -71,7 +77,12 @@ class _Newton:
         if sim.fbar and sim.axisymmetric:          # particle layers: SetupMixin.add_boundary
             raise NotImplementedError(f"{type(self).__name__}: fbar=True needs a plane or 3D "
                                       f"grid (got an axisymmetric grid)")
-        self.system = self._system(sim, stencil_rings(sim), shape)
+        rings = stencil_rings(sim)
+        if self.ghost > 0:                  # facet terms couple the nodes of two cells
+            from .ghost import GhostPenalty
+            self._ghost = GhostPenalty(sim, self.ghost, self.ghost_fill)
+            rings = max(rings, 2)
+        self.system = self._system(sim, rings, shape)
 
     def _system(self, sim, rings, shape, iterative=None):
         """The LinearSystem of this integrator's options with a pattern of `rings` cell rings
@@ -165,6 +176,13 @@ class _Newton:
         A4 = np.empty((n, 3, 3, 3, 3))
         idx = np.arange(n, dtype=np.int64)
         fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
+        motion = pm.targets(sim, sim.t + dt) if sim.particle_motions else None
+        if motion is not None:
+            f_motion = np.zeros((len(motion[0]), d))
+        ghost = self._ghost
+        if ghost is not None:
+            ghost.update(sim, sim.nodal["active"],
+                         np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32))
 
         def newton_residual(du):
             """(R, |R|, fint, reaction, sig) at du; leaves sim._dF (and F-bar's dF0) at du."""
@@ -175,6 +193,14 @@ class _Newton:
             sim.internal_force(P, fint)          # -f_int (local)
             grid.accumulate(fint)
             R = f_ext + fint - inertia(du)
+            if ghost is not None:
+                R -= ghost.force(du)
+            if motion is not None:
+                fm_ = np.zeros_like(du)
+                pm.penalty_force(motion[0], sim.nodes, sim.N, du, motion[1], motion[2],
+                                 motion[3], fm_, f_motion)
+                grid.accumulate(fm_)
+                R += fm_
             robin = sim.robin
             if robin is not None or sim.layers:
                 fr = np.zeros_like(du)
@@ -215,11 +241,15 @@ class _Newton:
                 mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
             first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
             extra = None
-            if sim.layers:
+            if sim.layers or motion is not None:
                 def extra(data):
-                    kl.layer_tangent(sim.grid.D, sim.layer_particles(), sim.nodes, sim.N, p.F,
-                                     p.layer_an0, p.layer_coef, c_v, plan, sys.nodeptr,
-                                     constrained, data)
+                    if sim.layers:
+                        kl.layer_tangent(sim.grid.D, sim.layer_particles(), sim.nodes, sim.N,
+                                         p.F, p.layer_an0, p.layer_coef, c_v, plan,
+                                         sys.nodeptr, constrained, data)
+                    if motion is not None:
+                        pm.penalty_tangent(motion[0], sim.nodes, sim.N, motion[2], motion[3],
+                                           plan, sys.nodeptr, constrained, data)
             self.assemble_tangent(sim, A4, plan, np.repeat(m, d) * m_coef, constrained, extra)
             robin = sim.robin
             if robin is not None:
@@ -227,6 +257,8 @@ class _Newton:
                 B = robin.tangent(sim.robin_u + du, velocity(du), c_v, own)
                 if B is not None:
                     sys.add(B)
+            if ghost is not None:
+                sys.add(ghost.Gz)
             t3 = time.perf_counter()
             try:
                 delta = sys.solve(R)
@@ -250,10 +282,26 @@ class _Newton:
             T["solve"] += time.perf_counter() - t2
         self.iterations.append(it)
         sim.nodal["reaction"] = reaction        # force the fixed dofs exert (summed over ranks)
+        if motion is not None:                  # each prescribed particle motion's reaction
+            self._motion_reactions(sim, motion[0], f_motion)
         if sim.robin is not None:
             sim.robin_u += du
         sim.stats.update(newton_iterations=it, residual=rnorm / scale, ksp_iterations=sys.iterations)
         return du
+
+
+    @staticmethod
+    def _motion_reactions(sim, sel, f):
+        """Store sum_p f_p per prescribed particle motion (summed over ranks)."""
+        tag = sim.particles.motion_tag[sel].astype(np.int64) - 1
+        n = len(sim.particle_motions)
+        r = np.zeros((n, sim.gdim))
+        for c in range(sim.gdim):
+            r[:, c] = np.bincount(tag, weights=f[:, c], minlength=n)
+        if sim.comm.size > 1:
+            r = sim.comm.allreduce(r)
+        for m in sim.particle_motions:
+            m.reaction = r[m.index]
 
 
 class Newmark(_Newton):

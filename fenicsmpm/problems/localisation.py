@@ -122,7 +122,7 @@ def prandtl_band_length(half_width):
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
                   half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
-                  material=None, line_search=0):
+                  material=None, line_search=0, footing="nodes", ghost=0.0):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
     size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
@@ -149,21 +149,31 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     pts = Particles.fill(grid, soil(length, m, softening) if material is None else material,
                          per_cell=2,
                          region=lambda x: x[:, 1] < depth)
+    if footing not in ("nodes", "particles"):
+        raise ValueError(f"strip_footing: 'footing' must be 'nodes' or 'particles', got {footing!r}")
     under = lambda x: (np.abs(x[:, 1] - depth) < tol) & (x[:, 0] <= half_width + tol)
-    qs = QuasiStatic(displacement=lambda x, t: np.column_stack(
-        [np.zeros(len(x)), np.where(under(x), -settlement * t, 0.0)]), line_search=line_search)
+    push = lambda x, t: np.column_stack([np.zeros(len(x)), np.full(len(x), -settlement * t)])
+    qs = QuasiStatic(displacement=(lambda x, t: np.where(under(x)[:, None], push(x, t), 0.0))
+                     if footing == "nodes" else None, line_search=line_search, ghost=ghost)
     sim = Simulation(grid, pts, qs, dt=1.0 / steps, max_dt_cuts=cuts, fbar=fbar, shape=shape)
     sim.fix(lambda x: np.abs(x[:, 1]) < tol)
     sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - width) < tol), [0])
-    sim.fix(under, [1])
     own = np.zeros(grid.n_nodes, dtype=bool)
-    own[: grid.n_owned_nodes] = under(grid.node_x[: grid.n_owned_nodes])
+    if footing == "nodes":
+        sim.fix(under, [1])
+        own[: grid.n_owned_nodes] = under(grid.node_x[: grid.n_owned_nodes])
+    else:       # the top particle row under B/2, pushed down by penalty (particle_motion)
+        sim.move_particles(lambda x: (x[:, 1] > depth - 0.5 * h) & (x[:, 0] < half_width),
+                           push, components=[1])
     p = sim.particles
     s, pr = [0.0], [0.0]
 
     def record():
         s.append(settlement * sim.t)
-        pr.append(-_gsum(comm, float(sim.nodal["reaction"][own, 1].sum())) / half_width)
+        if footing == "nodes":
+            pr.append(-_gsum(comm, float(sim.nodal["reaction"][own, 1].sum())) / half_width)
+        else:
+            pr.append(-float(sim.particle_reaction(0)[1]) / half_width)
 
     t0 = time.perf_counter()
     done, msg = _run(sim, steps, record)

@@ -1,0 +1,94 @@
+"""Ghost stabilisation of poorly filled cells for the implicit grid solve (Coombs 2020,
+"Ghost stabilisation of the material point method for stable quasi-static and dynamic
+analysis of large deformation problems", IJNME 121; Burman 2010's face ghost penalty).
+
+A node that only the tail of one or two particles supports (a particle heaving into the
+empty cell row above a surface, a cell left almost empty) has a stiffness row of a few
+particles; when they yield (perfect plasticity: no stiffness along the flow direction) that
+row is singular and Newton diverges there. The ghost penalty ties the displacement increment
+of such cells to their neighbours' by penalising the jump of its normal gradient across the
+faces of poorly filled cells:
+
+    G(du, w) = gamma M sum_F h_F int_F [[grad du . n]] . [[grad w . n]] dS,
+
+M = rho c_p^2 (the largest constrained modulus of the materials), h_F the mean cell diameter
+of the face's cells, F every interior facet between two active cells (every node active) of
+which at least one is poorly filled (particle volume below `fill` times its cell volume).
+Newton's residual gets -G du and its Jacobian +G. The term acts on the step's increment only
+(updated Lagrangian: nothing accumulates), vanishes for a field linear across the face and is
+of order gamma h in the converged solution. One UFL form, compiled once; the cell indicators
+are DG0 functions set every step (the owned cells from their own particles, then scattered to
+the ghost cells)."""
+import numpy as np
+import ufl
+from dolfinx import fem
+import dolfinx.fem.petsc
+from petsc4py import PETSc
+
+
+class GhostPenalty:
+    """The ghost matrix G of `sim` (module docstring): gamma = `factor`, cells with a particle
+    volume below `fill` x their volume count as poorly filled."""
+
+    def __init__(self, sim, factor, fill):
+        grid = sim.grid
+        msh = grid.mesh
+        Q = fem.FunctionSpace(msh, ("DG", 0))
+        self.active = fem.Function(Q)
+        self.poor = fem.Function(Q)
+        self.fill = float(fill)
+        mats = [m for m in sim.particles.materials if getattr(m, "p_wave_speed", None)]
+        M = max([m.density * m.p_wave_speed ** 2 for m in mats], default=0.0)
+        if sim.comm.size > 1:
+            from mpi4py import MPI
+            M = sim.comm.allreduce(M, op=MPI.MAX)
+        self.modulus = M
+        n, h = ufl.FacetNormal(msh), ufl.CellDiameter(msh)
+        u, w = ufl.TrialFunction(grid.V), ufl.TestFunction(grid.V)
+        a, c = self.active, self.poor
+        weight = a("+") * a("-") * ufl.max_value(c("+"), c("-"))
+        self.form = fem.form(float(factor) * M * ufl.avg(h) * weight
+                             * ufl.inner(ufl.jump(ufl.grad(u), n), ufl.jump(ufl.grad(w), n))
+                             * ufl.dS)
+        self.G = dolfinx.fem.petsc.create_matrix(self.form)
+        self.Gz = None
+        vol = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(Q) * ufl.dx))
+        vol.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        self.volume = vol.array.copy()          # owned cells
+        vol.destroy()
+        self.x = fem.Function(grid.V)
+        self.y = fem.Function(grid.V)
+        self.faces = 0
+
+    def update(self, sim, active, constrained_owned_dofs):
+        """Set the indicators from the particles and `active` nodes, assemble G and the copy
+        with the constrained rows and columns zeroed (the tangent's)."""
+        grid, p = sim.grid, sim.particles
+        own = grid.n_owned_cells
+        filled = np.bincount(p.cell, weights=p.V, minlength=grid.n_cells)[:own]
+        act = np.all(active[grid.cell_nodes], axis=1).astype(float)
+        self.active.x.array[:] = act
+        poor = np.zeros(grid.n_cells)
+        poor[:own] = filled < self.fill * self.volume
+        self.poor.x.array[:] = poor
+        self.poor.x.scatter_forward()
+        self.G.zeroEntries()
+        dolfinx.fem.petsc.assemble_matrix(self.G, self.form)
+        self.G.assemble()
+        if self.Gz is None:
+            self.Gz = self.G.duplicate(copy=True)
+        else:
+            self.G.copy(self.Gz, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
+        self.Gz.zeroRowsColumnsLocal(constrained_owned_dofs, diag=0.0)
+
+    def force(self, du):
+        """G du as a nodal array (n_nodes, gdim), complete on every rank."""
+        self.x.x.array[:] = du.ravel()
+        self.G.mult(self.x.vector, self.y.vector)
+        self.y.x.scatter_forward()
+        return self.y.x.array.reshape(du.shape)
+
+    def destroy(self):
+        self.G.destroy()
+        if self.Gz is not None:
+            self.Gz.destroy()
