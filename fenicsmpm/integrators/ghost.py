@@ -86,7 +86,7 @@ class GhostPenalty:
         self.x.x.array[:] = du.ravel()
         self.G.mult(self.x.vector, self.y.vector)
         self.y.x.scatter_forward()
-        return self.y.x.array.reshape(du.shape)
+        return self.y.x.array.reshape(du.shape).copy()
 
     def destroy(self):
         self.G.destroy()
