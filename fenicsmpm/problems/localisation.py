@@ -137,7 +137,12 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     (F-bar with its consistent tangent, kernels.fbar; "auto", the library default, turns it
     on for this von Mises soil); shape: Simulation(shape=...); material: a material instead of
     the W5 soil (then length, m and softening are not used), e.g. the Prandtl soil of
-    problems.footing; line_search: fm.QuasiStatic(line_search=...)."""
+    problems.footing; line_search: fm.QuasiStatic(line_search=...); ghost:
+    fm.QuasiStatic(ghost=...) (the ghost penalty of poorly filled cells, integrators.ghost).
+    footing="nodes" (default): the footing is the surface nodes with x <= B/2, valid while
+    the settlement is well below h (the soil then leaves those nodes); "particles": the top
+    particle row under B/2 is pushed down by penalty (Simulation.move_particles), so the
+    footing moves with the soil, p = particle reaction / (B/2)."""
     from mpi4py import MPI
     comm = MPI.COMM_WORLD if comm is None else comm
     top = depth + max(2.0 * h, 0.25)               # empty cells above the soil for the heave
