@@ -4,9 +4,9 @@ fm.QuasiStatic / fm.Newmark ghost=), serially and under `mpirun -n 2`.
 - The penalty vanishes on fields linear across the faces (consistency) and acts on a kink.
 - Full cells get no ghost faces: a filled column gives the same answer with and without it.
 - The W5 footing of prescribed nodes on the perfectly plastic W5 clay (problems.localisation.
-  strip_footing(0.125, softening=False)): without it an inverted particle stops the push at
-  94 mm (particles heaving into the empty row beside the footing); with ghost=0.01 it reaches
-  100 mm and the pressure over the last third is 1.045 (2 + pi) c_u (Prandtl's limit)."""
+  strip_footing(0.125, softening=False)): without it an inverted particle stopped the push
+  at 94 mm in a serial run (particles heaving into the empty row beside the footing; where
+  it stops follows round-off, and a 2-rank run completed); with ghost=0.01 it reaches 100 mm and the pressure over the last third is 1.045 (2 + pi) c_u (Prandtl's limit)."""
 import numpy as np
 import pytest
 from dolfinx import mesh as dmesh
@@ -70,8 +70,6 @@ def test_full_cells_are_untouched():
 
 
 def test_ghost_carries_the_node_footing():
-    plain = localisation.strip_footing(0.125, softening=False)
-    assert not plain["completed"], plain["stopped"]
     ghost = localisation.strip_footing(0.125, softening=False, ghost=0.01)
     assert ghost["completed"], ghost["stopped"]
     q = ghost["pressure"] / ((2.0 + np.pi) * 1e4)
