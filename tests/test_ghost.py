@@ -80,3 +80,11 @@ def test_ghost_carries_the_node_footing():
 def test_ghost_options_are_checked(name, bad):
     with pytest.raises(ValueError, match=f"'{name}'"):
         fm.QuasiStatic(**{name: bad})
+
+
+def test_ghost_refuses_periodic_grids():
+    sim = _half_filled(ghost=0.01)
+    sim.set_periodic(axis=0)
+    sim.fix(lambda x: np.abs(x[:, 1]) < 1e-9)
+    with pytest.raises(NotImplementedError, match="periodic"):
+        sim.step()

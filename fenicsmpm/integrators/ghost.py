@@ -32,6 +32,9 @@ class GhostPenalty:
 
     def __init__(self, sim, factor, fill):
         grid = sim.grid
+        if grid.axisymmetric:
+            raise NotImplementedError("ghost > 0 needs a plane or 3D grid (got an axisymmetric "
+                                      "grid: the penalty form has no hoop weighting)")
         msh = grid.mesh
         Q = fem.FunctionSpace(msh, ("DG", 0))
         self.active = fem.Function(Q)
@@ -58,12 +61,14 @@ class GhostPenalty:
         vol.destroy()
         self.x = fem.Function(grid.V)
         self.y = fem.Function(grid.V)
-        self.faces = 0
 
     def update(self, sim, active, constrained_owned_dofs):
         """Set the indicators from the particles and `active` nodes, assemble G and the copy
         with the constrained rows and columns zeroed (the tangent's)."""
         grid, p = sim.grid, sim.particles
+        if grid.periodic is not None:      # its forces would need the tie's master-slave sum
+            raise NotImplementedError("ghost > 0 is not available on periodic grids "
+                                      "(Simulation.set_periodic)")
         own = grid.n_owned_cells
         filled = np.bincount(p.cell, weights=p.V, minlength=grid.n_cells)[:own]
         act = np.all(active[grid.cell_nodes], axis=1).astype(float)
