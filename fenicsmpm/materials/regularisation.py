@@ -42,7 +42,9 @@ is an O(dt) lag of the softening behind the neighbours' plastic flow.  Without s
 Neighbour search: the points are binned into a uniform lattice of cell size h (the grid's
 smallest cell size) anchored at the mesh's lower corner, so on structured grids the bins are
 the grid's cells; a point scans the ceil(3 l / h) rings of bins around its own, O(n k) for k
-neighbours, and is skipped (A = 0) when no point with kappa != 0 lies in those bins.  Under
+neighbours, and is skipped (A = 0) when no point with kappa != 0 lies in those bins. The
+points are averaged in parallel chunks of RETURN_CHUNK (kernels.threads), the same bits on
+any number of threads.  Under
 MPI every rank receives the particles of the other ranks within 3 l of its particles'
 bounding box (ghost particles, one alltoall), so the average is the serial one up to the
 summation order.  The time spent is in sim.timers["nonlocal"].
@@ -52,6 +54,7 @@ import math
 import numba
 import numpy as np
 
+from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .validation import check_positive, check_real
 
 __all__ = ["NonlocalSoftening", "nonlocal_average", "regularise", "CUTOFF"]
@@ -59,11 +62,22 @@ __all__ = ["NonlocalSoftening", "nonlocal_average", "regularise", "CUTOFF"]
 CUTOFF = 3.0        # neighbours within CUTOFF * l (w(3 l) / max w < 1e-3)
 
 
-@numba.njit(cache=True)
 def nonlocal_average(x, vol, kap, n_own, origin, hb, length, m, out):
     """out[p] = A_p = (1 - m) kap[p] + m sum_q w_pq V_q kap_q / sum_q w_pq V_q for the first
     n_own points p of x (the rest are ghosts), w = r / l^2 exp(-(r/l)^2) for r < 3 l
-    (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`."""
+    (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`. The points
+    are binned serially, then averaged in parallel chunks (the same bits on any number of
+    threads)."""
+    b, nb, start, order, hot = _bins(x, kap, origin, hb)
+    nc = particle_chunks(n_own, RETURN_CHUNK)
+    _average(x, vol, kap, n_own, b, nb, start, order, hot, (CUTOFF * length) ** 2,
+             1.0 / (length * length), int(math.ceil(CUTOFF * length / hb)), m, nc, out)
+
+
+@numba.njit(cache=True)
+def _bins(x, kap, origin, hb):
+    """Bin indices b (n, 3), bin counts nb, the points sorted by bin (start, order) and the
+    bins holding a point with kap != 0 (hot)."""
     n, d = x.shape
     b = np.zeros((n, 3), dtype=np.int64)
     nb = np.ones(3, dtype=np.int64)
@@ -81,46 +95,58 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, m, out):
         start[c + 1] += start[c]
     fill = start[:-1].copy()
     order = np.empty(n, dtype=np.int64)
-    hot = np.zeros(len(start) - 1, dtype=np.bool_)      # bins holding a point with kap != 0
+    hot = np.zeros(len(start) - 1, dtype=np.bool_)
     for j in range(n):
         order[fill[lin[j]]] = j
         fill[lin[j]] += 1
         if kap[j] != 0.0:
             hot[lin[j]] = True
-    rad2 = (CUTOFF * length) ** 2
-    il2 = 1.0 / (length * length)
-    nr = int(math.ceil(CUTOFF * length / hb))
+    return b, nb, start, order, hot
+
+
+@numba.njit(cache=True, parallel=PRANGE)
+def _average(x, vol, kap, n_own, b, nb, start, order, hot, rad2, il2, nr, m, nc, out):
+    """The averages of nonlocal_average, chunk c of nc on a thread each."""
+    for c in numba.prange(nc):
+        lo, hi = chunk(n_own, nc, c)
+        for p in range(lo, hi):
+            out[p] = _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr, m)
+
+
+@numba.njit(cache=True)
+def _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr, m):
+    """A_p of nonlocal_average: 0 when no point within reach has kap != 0."""
+    d = x.shape[1]
     lo = np.zeros(3, dtype=np.int64)
     hi = np.ones(3, dtype=np.int64)
-    for p in range(n_own):
-        for k in range(d):
-            lo[k] = max(0, b[p, k] - nr)
-            hi[k] = min(nb[k], b[p, k] + nr + 1)
-        near = False
-        for b0 in range(lo[0], hi[0]):
-            for b1 in range(lo[1], hi[1]):
-                for b2 in range(lo[2], hi[2]):
-                    near = near or hot[(b0 * nb[1] + b1) * nb[2] + b2]
-        if not near:                # every kap within reach is 0 (kap[p] too): A_p = 0
-            out[p] = 0.0
-            continue
-        num = 0.0
-        den = 0.0
-        for b0 in range(lo[0], hi[0]):
-            for b1 in range(lo[1], hi[1]):
-                for b2 in range(lo[2], hi[2]):
-                    c = (b0 * nb[1] + b1) * nb[2] + b2
-                    for jj in range(start[c], start[c + 1]):
-                        q = order[jj]
-                        r2 = 0.0
-                        for k in range(d):
-                            r2 += (x[p, k] - x[q, k]) ** 2
-                        if r2 < rad2:
-                            w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
-                            num += w * kap[q]
-                            den += w
-        avg = num / den if den > 0.0 else kap[p]
-        out[p] = (1.0 - m) * kap[p] + m * avg
+    for k in range(d):
+        lo[k] = max(0, b[p, k] - nr)
+        hi[k] = min(nb[k], b[p, k] + nr + 1)
+    near = False
+    for b0 in range(lo[0], hi[0]):
+        for b1 in range(lo[1], hi[1]):
+            for b2 in range(lo[2], hi[2]):
+                if hot[(b0 * nb[1] + b1) * nb[2] + b2]:
+                    near = True
+    if not near:
+        return 0.0
+    num = 0.0
+    den = 0.0
+    for b0 in range(lo[0], hi[0]):
+        for b1 in range(lo[1], hi[1]):
+            for b2 in range(lo[2], hi[2]):
+                c = (b0 * nb[1] + b1) * nb[2] + b2
+                for jj in range(start[c], start[c + 1]):
+                    q = order[jj]
+                    r2 = 0.0
+                    for k in range(d):
+                        r2 += (x[p, k] - x[q, k]) ** 2
+                    if r2 < rad2:
+                        w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
+                        num += w * kap[q]
+                        den += w
+    avg = num / den if den > 0.0 else kap[p]
+    return (1.0 - m) * kap[p] + m * avg
 
 
 def _with_ghosts(comm, x, vol, kap, radius):
