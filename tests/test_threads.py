@@ -209,3 +209,25 @@ def test_run_on_1_and_2_threads(tmp_path):
         assert r["n"] == 17956, (shape, r)
         assert max(r["momentum"]) < 1e-12, (shape, r)
         assert r["x"] < 1e-12 and r["v"] < 1e-12 and r["stress"] < 1e-12, (shape, r)
+
+
+def test_nonlocal_average_same_bits_on_1_and_2_threads():
+    """materials.regularisation.nonlocal_average: chunks in parallel, the same bits as one
+    thread (and 2048 points > RETURN_CHUNK, so there are several chunks)."""
+    from fenicsmpm.materials.regularisation import nonlocal_average
+    rng = np.random.default_rng(3)
+    x = rng.random((2048, 2))
+    vol = rng.random(2048) * 1e-3
+    kap = np.where(rng.random(2048) < 0.5, rng.random(2048), 0.0)
+    outs = []
+    before = numba.get_num_threads()
+    try:
+        for t in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
+            numba.set_num_threads(t)
+            out = np.empty(2000)
+            nonlocal_average(x, vol, kap, 2000, np.zeros(2), 0.02, 0.03, 2.0, out)
+            outs.append(out)
+    finally:
+        numba.set_num_threads(before)
+    assert np.any(outs[0] != 0.0)
+    assert np.array_equal(outs[0], outs[1])
