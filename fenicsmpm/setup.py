@@ -99,7 +99,9 @@ class SetupMixin:
         (fenicsmpm.boundaries.particle_motion: springs of `penalty` times the particle's own
         stiffness). A displacement-controlled rigid footing or plate that, unlike fixed mesh
         nodes, moves with the material. Returns the constraint's index for
-        particle_reaction(). Collective."""
+        particle_reaction(). Collective. The marks travel with the particles (MPI
+        migration, checkpoints); the function does not: after a restart, add the constraint
+        again, its displacement then counted from the restart."""
         from .boundaries import particle_motion as pm
         name = f"move_particles #{len(self.particle_motions)}"
         if getattr(self.integrator, "explicit", True):

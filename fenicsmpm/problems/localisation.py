@@ -122,7 +122,7 @@ def prandtl_band_length(half_width):
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
                   half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
-                  material=None, line_search=0, footing="nodes", ghost=0.0):
+                  material=None, line_search=0, footing="nodes", ghost=0.0, rtol=1e-8):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
     size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
@@ -138,7 +138,8 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     on for this von Mises soil); shape: Simulation(shape=...); material: a material instead of
     the W5 soil (then length, m and softening are not used), e.g. the Prandtl soil of
     problems.footing; line_search: fm.QuasiStatic(line_search=...); ghost:
-    fm.QuasiStatic(ghost=...) (the ghost penalty of poorly filled cells, integrators.ghost).
+    fm.QuasiStatic(ghost=...) (the ghost penalty of poorly filled cells, integrators.ghost);
+    rtol: fm.QuasiStatic(rtol=...).
     footing="nodes" (default): the footing is the surface nodes with x <= B/2, valid while
     the settlement is well below h (the soil then leaves those nodes); "particles": the top
     particle row under B/2 is pushed down by penalty (Simulation.move_particles), so the
@@ -159,7 +160,8 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     under = lambda x: (np.abs(x[:, 1] - depth) < tol) & (x[:, 0] <= half_width + tol)
     push = lambda x, t: np.column_stack([np.zeros(len(x)), np.full(len(x), -settlement * t)])
     qs = QuasiStatic(displacement=(lambda x, t: np.where(under(x)[:, None], push(x, t), 0.0))
-                     if footing == "nodes" else None, line_search=line_search, ghost=ghost)
+                     if footing == "nodes" else None, line_search=line_search, ghost=ghost,
+                     rtol=rtol)
     sim = Simulation(grid, pts, qs, dt=1.0 / steps, max_dt_cuts=cuts, fbar=fbar, shape=shape)
     sim.fix(lambda x: np.abs(x[:, 1]) < tol)
     sim.fix(lambda x: (np.abs(x[:, 0]) < tol) | (np.abs(x[:, 0] - width) < tol), [0])
