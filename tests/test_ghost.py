@@ -76,6 +76,19 @@ def test_ghost_carries_the_node_footing():
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.06, q          # 1.045
 
 
+def test_softening_footing_through_its_particles():
+    """The softening W5 footing (L = 0.25 m) pushed through its top particle row with the
+    ghost penalty, line search and rtol 1e-6 (the bench localisation configuration) reaches
+    100 mm at h = 0.125; peak 1.043 (2 + pi) c_u, softened to half of it."""
+    r = localisation.strip_footing(0.125, 0.25, footing="particles", ghost=0.01,
+                                   line_search=6, rtol=1e-6)
+    assert r["completed"], r["stopped"]
+    peak = r["pressure"].max() / ((2.0 + np.pi) * 1e4)
+    assert abs(peak - 1.0) < 0.05, peak
+    assert r["pressure"][-1] < 0.6 * r["pressure"].max()
+    assert max(r["newton"]) <= 10, r["newton"]
+
+
 @pytest.mark.parametrize("name, bad", [("ghost", -1.0), ("ghost", True), ("ghost_fill", -0.5)])
 def test_ghost_options_are_checked(name, bad):
     with pytest.raises(ValueError, match=f"'{name}'"):
