@@ -3,10 +3,10 @@ fm.QuasiStatic / fm.Newmark ghost=), serially and under `mpirun -n 2`.
 
 - The penalty vanishes on fields linear across the faces (consistency) and acts on a kink.
 - Full cells get no ghost faces: a filled column gives the same answer with and without it.
-- The W5 footing of prescribed nodes on the perfectly plastic W5 clay (problems.localisation.
-  strip_footing(0.125, softening=False)): without it an inverted particle stopped the push
-  at 94 mm in a serial run (particles heaving into the empty row beside the footing; where
-  it stops follows round-off, and a 2-rank run completed); with ghost=0.01 it reaches 100 mm and the pressure over the last third is 1.045 (2 + pi) c_u (Prandtl's limit)."""
+- The softening W5 footing pushed through its particles (the bench localisation
+  configuration) reaches 100 mm at h = 0.125. Where the penalty decides the outcome
+  (h = 0.0625: a collapsed particle at the surface beside the footing at 68 mm without it)
+  the run takes minutes: docs/guide/choosing.md has the figures."""
 import numpy as np
 import pytest
 from dolfinx import mesh as dmesh
@@ -67,13 +67,6 @@ def test_full_cells_are_untouched():
         out.append(u[np.argsort(ids)])
     assert np.abs(out[0]).max() > 0
     assert np.allclose(out[0], out[1], rtol=0, atol=1e-12 * np.abs(out[0]).max())
-
-
-def test_ghost_carries_the_node_footing():
-    ghost = localisation.strip_footing(0.125, softening=False, ghost=0.01)
-    assert ghost["completed"], ghost["stopped"]
-    q = ghost["pressure"] / ((2.0 + np.pi) * 1e4)
-    assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.06, q          # 1.045
 
 
 def test_softening_footing_through_its_particles():
