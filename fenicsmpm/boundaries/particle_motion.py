@@ -18,6 +18,7 @@ import numpy as np
 from numba import njit
 
 from ..kernels.transfer import add_block
+from ..materials import constrained_moduli
 
 
 class ParticleMotion:
@@ -48,7 +49,7 @@ def attach(sim, motion, region):
     tag[sel] = motion.index + 1
     x0[sel] = p.x[sel]
     u0[sel] = p.u[sel]
-    M = np.array([m.density * m.p_wave_speed ** 2 for m in p.materials])
+    M = constrained_moduli(p.materials)
     k[sel] = motion.penalty * M[p.material_id[sel]] * p.V[sel] / sim.grid.h ** 2
     n = int(np.count_nonzero(sel))
     return sim.comm.allreduce(n) if sim.comm.size > 1 else n

@@ -25,6 +25,8 @@ from dolfinx import fem
 import dolfinx.fem.petsc
 from petsc4py import PETSc
 
+from ..materials import constrained_moduli
+
 
 class GhostPenalty:
     """The ghost matrix G of `sim` (module docstring): gamma = `factor`, cells with a particle
@@ -40,12 +42,7 @@ class GhostPenalty:
         self.active = fem.Function(Q)
         self.poor = fem.Function(Q)
         self.fill = float(fill)
-        mats = [m for m in sim.particles.materials if getattr(m, "p_wave_speed", None)]
-        M = max([m.density * m.p_wave_speed ** 2 for m in mats], default=0.0)
-        if sim.comm.size > 1:
-            from mpi4py import MPI
-            M = sim.comm.allreduce(M, op=MPI.MAX)
-        self.modulus = M
+        M = float(constrained_moduli(sim.particles.materials).max(initial=0.0))
         n, h = ufl.FacetNormal(msh), ufl.CellDiameter(msh)
         u, w = ufl.TrialFunction(grid.V), ufl.TestFunction(grid.V)
         a, c = self.active, self.poor

@@ -289,7 +289,6 @@ class _Newton:
         sim.stats.update(newton_iterations=it, residual=rnorm / scale, ksp_iterations=sys.iterations)
         return du
 
-
     @staticmethod
     def _motion_reactions(sim, sel, f):
         """Store sum_p f_p per prescribed particle motion (summed over ranks)."""

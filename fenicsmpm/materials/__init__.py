@@ -22,4 +22,11 @@ from .von_mises import VonMises
 from .piola import first_piola, first_piola_tangent, strain_energy_increment
 
 __all__ = ["Hencky", "Hypoplastic", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
-           "first_piola_tangent", "strain_energy_increment"]
+           "first_piola_tangent", "strain_energy_increment", "constrained_moduli"]
+
+
+def constrained_moduli(materials):
+    """M = rho c_p^2 of each material (its initial constrained modulus), as an array: the
+    stiffness scale of penalties (boundaries.particle_motion, integrators.ghost)."""
+    import numpy as np
+    return np.array([m.density * m.p_wave_speed ** 2 for m in materials], dtype=float)
