@@ -475,7 +475,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         before any state changed) retry as two steps of dt/2, at most `cuts_left` deep. The
         nonlocal softening variables are first computed from the committed state
         (materials.regularisation)."""
-        regularise(self)
+        regularise(self, dt)
         try:
             self.integrator.step(self, dt)
         except (RuntimeError, FloatingPointError) as err:

@@ -84,7 +84,8 @@ def test_mohr_coulomb_without_softening_is_unchanged():
 @pytest.mark.parametrize("name", ["VonMises", "MohrCoulomb"])
 def test_nonlocal_strength_at_step_start_is_that_of_A(name):
     """With kappa_bar = A at the start of a step the yield surface is the local one at
-    kappa = A: the same trial stresses yield (random increments, A in the softening range)."""
+    kappa = A: the same trial stresses yield (random increments, A in the softening range;
+    kappa_n = 0 and <kappa> = A / m, so A = (1 - m) 0 + m <kappa>)."""
     rng = np.random.default_rng(2)
     n = 400
     if name == "VonMises":
@@ -102,7 +103,7 @@ def test_nonlocal_strength_at_step_start_is_that_of_A(name):
     flows = []
     for mat in (loc, nl):
         st = np.zeros((n, mat.n_state))
-        st[:, 0 if mat is loc else mat.nonlocal_column] = a
+        st[:, 0 if mat is loc else mat.nonlocal_column] = a if mat is loc else a / mat.nonlocal_m
         mat.stress(np.arange(n), dF, None, s0, np.zeros((n, 3, 3)), st)
         flows.append(st[:, 0] - (a if mat is loc else 0.0) > 0.0)
     assert 0.1 < np.mean(flows[0]) < 0.9, np.mean(flows[0])      # both kinds of step occur
@@ -204,7 +205,7 @@ def test_explicit_no_softening_unchanged_and_softening_regularised():
     assert np.allclose(a, b[:, :3], rtol=1e-12, atol=1e-12)
     c, sim = _collapse(_SOFT)
     assert np.all(np.isfinite(c)) and c[:, 2].max() > 1e-3
-    # the strength variable A is the over-nonlocal average, not the local eps_p
+    # the average column <eps_p> is not the local eps_p
     assert np.abs(c[:, 3] - c[:, 2]).max() > 1e-3
     assert sim.timers["nonlocal"] > 0.0
 
@@ -215,13 +216,13 @@ def test_nonlocal_average_kernel_against_brute_force():
     x = rng.uniform(0.0, 1.0, (400, 2))
     vol = rng.uniform(0.5, 1.5, 400)
     kap = np.where(rng.uniform(size=400) < 0.3, rng.uniform(0, 0.1, 400), 0.0)
-    l, m, n_own = 0.07, 2.0, 300
+    l, n_own = 0.07, 300
     out = np.empty(n_own)
-    nonlocal_average(x, vol, kap, n_own, np.zeros(2), 0.05, l, m, out)
+    nonlocal_average(x, vol, kap, n_own, np.zeros(2), 0.05, l, out)
     r = np.linalg.norm(x[:n_own, None, :] - x[None, :, :], axis=2)
     w = np.where(r < 3 * l, r / l ** 2 * np.exp(-(r / l) ** 2), 0.0) * vol[None, :]
     den = w.sum(axis=1)
-    ref = (1 - m) * kap[:n_own] + m * np.where(den > 0, (w @ kap) / np.where(den > 0, den, 1), kap[:n_own])
+    ref = np.where(den > 0, (w @ kap) / np.where(den > 0, den, 1), kap[:n_own])
     assert np.allclose(out, ref, rtol=1e-12, atol=1e-15)
 
 
@@ -234,3 +235,31 @@ def test_parameters_are_checked():
     m = fm.MohrCoulomb(E=1e6, nu=0.3, density=1.0, phi=30, c=1.0, eta=2.0, nonlocal_length=1.0)
     assert m.reduced(1.5).nonlocal_length == 1.0
     assert "nonlocal_length=1.0" in repr(m) and "nonlocal" not in repr(fm.VonMises(**W5_SOIL))
+
+
+def test_explicit_average_refreshed_on_its_schedule():
+    """Explicit runs refresh <eps_p> only at the steps refresh_due names (every REFRESH l / c_p,
+    here about 4 steps), and it does change there once the block flows."""
+    from fenicsmpm.materials.regularisation import REFRESH, refresh_due
+    sim = _collapse_simulation(_SOFT)
+    mat = sim.particles.materials[0]
+    tau = REFRESH * mat.nonlocal_length / mat.p_wave_speed
+    assert 2 < tau / sim.dt < 20, tau / sim.dt
+    changed, due = [], []
+    for _ in range(120):
+        before, t0 = sim.particles.state[:, mat.nonlocal_column].copy(), sim.t
+        sim.run(steps=1, progress=False)
+        due.append(refresh_due(t0, sim.t - t0, tau))
+        diff = np.abs(sim.particles.state[:, mat.nonlocal_column] - before).max(initial=0.0)
+        changed.append(sim.comm.allreduce(diff, op=MPI.MAX) > 0.0)
+    changed, due = np.array(changed), np.array(due)
+    assert not np.any(changed & ~due), np.flatnonzero(changed & ~due)
+    assert changed.sum() >= 5 and due.sum() < 0.5 * len(due), (changed.sum(), due.sum())
+
+
+def test_refresh_due():
+    from fenicsmpm.materials.regularisation import refresh_due
+    assert refresh_due(0.0, 0.1, 1.0)
+    steps = [refresh_due(k * 0.3, 0.3, 1.0) for k in range(10)]     # t = 0, 0.3, ..., 2.7
+    assert steps == [True, False, False, False, True, False, False, True, False, False]
+    assert all(refresh_due(k * 2.0, 2.0, 1.0) for k in range(5))    # dt > tau: every step

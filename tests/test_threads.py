@@ -225,7 +225,7 @@ def test_nonlocal_average_same_bits_on_1_and_2_threads():
         for t in (1, min(2, numba.config.NUMBA_NUM_THREADS)):
             numba.set_num_threads(t)
             out = np.empty(2000)
-            nonlocal_average(x, vol, kap, 2000, np.zeros(2), 0.02, 0.03, 2.0, out)
+            nonlocal_average(x, vol, kap, 2000, np.zeros(2), 0.02, 0.03, out)
             outs.append(out)
     finally:
         numba.set_num_threads(before)

@@ -39,9 +39,9 @@ closing a gap sees the elastic tangent).
 History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
                          1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p),
                          2 = g (the open gap, above),
-                         3 = with nonlocal_length, A = (1 - m) eps_d^p + m <eps_d^p> of the
-                             step start, from which phi and c follow within the step
-                             (materials.regularisation, _frozen).
+                         3 = with nonlocal_length, <eps_d^p>, the neighbourhood average
+                             (materials.regularisation); phi and c follow
+                             A = (1 - m) eps_d^p,n + m <eps_d^p> within the step (_frozen).
 """
 import math
 
@@ -51,7 +51,7 @@ import numpy as np
 from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .piola import eigh3
-from .regularisation import NonlocalSoftening
+from .regularisation import NonlocalSoftening, over_nonlocal
 from .validation import check_real
 
 __all__ = ["MohrCoulomb", "mohr_coulomb_stress_kernel", "mohr_coulomb_tangent_kernel"]
@@ -342,8 +342,9 @@ def _clearly_elastic(S, kap_n, par, st, w):
 @numba.njit(cache=True)
 def _frozen(state, p, nl, mf, par, out):
     """(kappa_n, parameters) seen by the return of particle p: (state[p, 0], par), or with the
-    over-nonlocal column nl >= 0 (materials.regularisation) holding A = (1 - m) kappa_n
-    + m <kappa>_n: kappa_bar = A + (1 - m) dkappa within the step, i.e.
+    column nl >= 0 of the neighbourhood average <kappa> (materials.regularisation), with
+    A = (1 - m) kappa_n + m <kappa> (over_nonlocal): kappa_bar = A + (1 - m) dkappa within the
+    step, i.e.
         exp(-eta kappa_bar) = exp(-eta' kappa'),  eta' = (1 - m) eta,  kappa' = A / (1 - m) + dkappa,
     so the return runs with kappa_n = A / (1 - m) and out = par with eta' (capped at the
     peak by _soft); it still returns the step's increment dkappa."""
@@ -352,7 +353,7 @@ def _frozen(state, p, nl, mf, par, out):
     for k in range(4):
         out[k] = par[k]
     out[4] = (1.0 - mf) * par[4]
-    return state[p, nl] / (1.0 - mf), out
+    return over_nonlocal(state, p, nl, mf) / (1.0 - mf), out
 
 
 @numba.njit(parallel=PRANGE, cache=True)
@@ -516,7 +517,7 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
         nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: phi and c follow the
         over-nonlocal average of eps_d^p (materials.regularisation).
     History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p, state[:, 2] = the gap g, with
-    nonlocal_length state[:, 3] = A (module docstring).
+    nonlocal_length state[:, 3] = <eps_d^p> (module docstring).
     """
 
     name = "MohrCoulomb"

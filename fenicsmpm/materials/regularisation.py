@@ -24,20 +24,30 @@ has strained much more than its neighbourhood it is < 0 and the strength exceeds
 (VonMises: c = c_u + H kappa_bar; MohrCoulomb caps phi and c at their peaks, where its
 exponential law would otherwise pass phi = 90 degrees).  The sums use the current volumes.
 
-Time discretisation (explicit and implicit alike): at the start of every step (and of every
-retried half step) Simulation._advance calls `regularise`, which stores
-    A_p = (1 - m) kappa_p,n + m <kappa>_p,n
-from the committed local kappa in the material's last state column (nonlocal_column).  In the
-step the return mapping uses kappa_bar = A_p + (1 - m) dkappa_p, dkappa_p the particle's own
-plastic increment: the neighbourhood average is lagged by one step (explicit in time), the
-local part is implicit.  With H <= 0 (eta >= 0) and m > 1 the strength then grows with the
-particle's own increment, slope (1 - m) H >= 0, so the return has one solution and the Newton
-tangent is the exact consistent tangent of this local return (VonMises: the radial return
-tangent with H_t = (1 - m) H; MohrCoulomb: its return with eta' = (1 - m) eta); it is local
-(no coupling between particles), symmetric for VonMises, and positive where the local
-softening tangent was negative, so Newton converges as for a hardening material.  The price
-is an O(dt) lag of the softening behind the neighbours' plastic flow.  Without softening
-(H = 0, eta = 0) the strength does not depend on kappa and the results are the local ones.
+Time discretisation: `regularise` (called by Simulation._advance at the start of every step
+and of every retried half step) stores the neighbourhood average <kappa>_p from the committed
+local kappa in the material's last state column (nonlocal_column), and the return mapping of
+the step (over_nonlocal) uses
+    kappa_bar = A_p + (1 - m) dkappa_p,     A_p = (1 - m) kappa_p,n + m <kappa>_p,
+dkappa_p the particle's own plastic increment: the neighbourhood average is lagged (explicit
+in time), the local part is implicit.  With H <= 0 (eta >= 0) and m > 1 the strength then
+grows with the particle's own increment, slope (1 - m) H >= 0, so the return has one solution
+and the Newton tangent is the exact consistent tangent of this local return (VonMises: the
+radial return tangent with H_t = (1 - m) H; MohrCoulomb: its return with eta' = (1 - m) eta);
+it is local (no coupling between particles), symmetric for VonMises, and positive where the
+local softening tangent was negative, so Newton converges as for a hardening material.
+Without softening (H = 0, eta = 0) the strength does not depend on kappa and the results are
+the local ones.
+When the average is refreshed: implicit integrators every step (few, large steps).  Explicit
+steps are many and short, and the average cannot change faster than plastic flow spreads
+over l: it is refreshed at the first step starting at or after each multiple of
+    tau = REFRESH * l / c_p        (c_p: the material's initial P-wave speed),
+four times the time a P wave takes to cross l (REFRESH = 4), while the local part
+(1 - m) kappa_p,n is current at every step.  Chosen by measurement on the softening slope of
+bench localisation (h = H/32, l = 4 h, about 40 steps per refresh): the run-out is 23.82 /
+23.78 / 23.70 / 23.64 m refreshing every step / with REFRESH = 1 / 2 / 4, and the averaging
+takes 90 / 51 / 35 / 21 % of the step time (docs/guide/materials.md).  The schedule depends only on (t, dt), so a restart from a
+checkpoint (the average travels as a state column) repeats it exactly.
 
 Neighbour search: the points are binned into a uniform lattice of cell size h (the grid's
 smallest cell size) anchored at the mesh's lower corner, so on structured grids the bins are
@@ -57,13 +67,22 @@ import numpy as np
 from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .validation import check_positive, check_real
 
-__all__ = ["NonlocalSoftening", "nonlocal_average", "regularise", "CUTOFF"]
+__all__ = ["NonlocalSoftening", "nonlocal_average", "regularise", "refresh_due",
+           "over_nonlocal", "CUTOFF", "REFRESH"]
 
 CUTOFF = 3.0        # neighbours within CUTOFF * l (w(3 l) / max w < 1e-3)
+REFRESH = 4.0       # explicit runs refresh the average every REFRESH * l / c_p
 
 
-def nonlocal_average(x, vol, kap, n_own, origin, hb, length, m, out):
-    """out[p] = A_p = (1 - m) kap[p] + m sum_q w_pq V_q kap_q / sum_q w_pq V_q for the first
+@numba.njit(cache=True)
+def over_nonlocal(state, p, nl, m):
+    """A_p = (1 - m) kappa_p,n + m <kappa>_p: the over-nonlocal variable at the start of the
+    step from the local kappa (column 0) and the neighbourhood average (column nl)."""
+    return (1.0 - m) * state[p, 0] + m * state[p, nl]
+
+
+def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
+    """out[p] = <kap>_p = sum_q w_pq V_q kap_q / sum_q w_pq V_q for the first
     n_own points p of x (the rest are ghosts), w = r / l^2 exp(-(r/l)^2) for r < 3 l
     (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`. The points
     are binned serially, then averaged in parallel chunks (the same bits on any number of
@@ -71,7 +90,7 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, m, out):
     b, nb, start, order, hot = _bins(x, kap, origin, hb)
     nc = particle_chunks(n_own, RETURN_CHUNK)
     _average(x, vol, kap, n_own, b, nb, start, order, hot, (CUTOFF * length) ** 2,
-             1.0 / (length * length), int(math.ceil(CUTOFF * length / hb)), m, nc, out)
+             1.0 / (length * length), int(math.ceil(CUTOFF * length / hb)), nc, out)
 
 
 @numba.njit(cache=True)
@@ -105,17 +124,17 @@ def _bins(x, kap, origin, hb):
 
 
 @numba.njit(cache=True, parallel=PRANGE)
-def _average(x, vol, kap, n_own, b, nb, start, order, hot, rad2, il2, nr, m, nc, out):
+def _average(x, vol, kap, n_own, b, nb, start, order, hot, rad2, il2, nr, nc, out):
     """The averages of nonlocal_average, chunk c of nc on a thread each."""
     for c in numba.prange(nc):
         lo, hi = chunk(n_own, nc, c)
         for p in range(lo, hi):
-            out[p] = _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr, m)
+            out[p] = _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr)
 
 
 @numba.njit(cache=True)
-def _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr, m):
-    """A_p of nonlocal_average: 0 when no point within reach has kap != 0."""
+def _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr):
+    """<kap>_p of nonlocal_average: 0 when no point within reach has kap != 0."""
     d = x.shape[1]
     lo = np.zeros(3, dtype=np.int64)
     hi = np.ones(3, dtype=np.int64)
@@ -145,8 +164,7 @@ def _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr, m):
                         w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
                         num += w * kap[q]
                         den += w
-    avg = num / den if den > 0.0 else kap[p]
-    return (1.0 - m) * kap[p] + m * avg
+    return num / den if den > 0.0 else kap[p]
 
 
 def _with_ghosts(comm, x, vol, kap, radius):
@@ -170,13 +188,22 @@ def _with_ghosts(comm, x, vol, kap, radius):
             np.concatenate([kap] + [g[2] for g in got]))
 
 
-def regularise(sim):
-    """At the start of a step: kappa_bar (column nonlocal_column) of every particle of a
-    material with a nonlocal_length, from the committed local kappa (column 0); collective.
+def refresh_due(t, dt, tau):
+    """Whether a step from t to t + dt refreshes an average kept for tau: true when a multiple
+    of tau lies in (t - dt, t] (the first step at or after it; always at t = 0)."""
+    return math.floor(t / tau) > math.floor((t - dt) / tau)
+
+
+def regularise(sim, dt):
+    """At the start of a step of dt: <kappa> (column nonlocal_column) of every particle of a
+    material with a nonlocal_length, from the committed local kappa (column 0), when due
+    (module docstring: every implicit step, every REFRESH l / c_p explicitly); collective.
     Adds its wall time to sim.timers["nonlocal"]."""
     import time
     p = sim.particles
-    mats = [m for m in p.materials if getattr(m, "nonlocal_length", None) is not None]
+    mats = [m for m in p.materials if getattr(m, "nonlocal_length", None) is not None
+            and (not sim.integrator.explicit
+                 or refresh_due(sim.t, dt, REFRESH * m.nonlocal_length / m.p_wave_speed))]
     if not mats:
         return
     t0 = time.perf_counter()
@@ -193,14 +220,12 @@ def regularise(sim):
     groups = dict((id(m), idx) for m, idx in sim.material_groups())
     for mat in mats:
         idx = groups.get(id(mat), np.zeros(0, dtype=np.int64))
-        col = mat.nonlocal_column
         x, vol, kap = _with_ghosts(comm, p.x[idx], p.V[idx], p.state[idx, 0],
                                    CUTOFF * mat.nonlocal_length)
         out = np.empty(len(idx))
         if len(idx):
-            nonlocal_average(x, vol, kap, len(idx), origin, grid.h, mat.nonlocal_length,
-                             mat.nonlocal_m, out)
-        p.state[idx, col] = out
+            nonlocal_average(x, vol, kap, len(idx), origin, grid.h, mat.nonlocal_length, out)
+        p.state[idx, mat.nonlocal_column] = out
     sim.timers["nonlocal"] = sim.timers.get("nonlocal", 0.0) + time.perf_counter() - t0
 
 
@@ -209,7 +234,7 @@ class NonlocalSoftening:
 
     nonlocal_length: None (local softening, the default) or the internal length l > 0;
     nonlocal_m: the over-nonlocal factor m >= 1 (module docstring).  With a length the
-    material has one more state column, `nonlocal_column`, holding kappa_bar.
+    material has one more state column, `nonlocal_column`, holding <kappa>.
     `plastic` marks the material as flowing plastically (shapes.choose_shape)."""
 
     plastic = True

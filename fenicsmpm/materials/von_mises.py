@@ -17,8 +17,8 @@ as d sigma / d sigma_tr, acting on the predictor increment X:
 n = s_tr/|s_tr|, H_t = H on the softening branch and 0 on the residual one.
 
 History (state columns): 0 = eps_p (equivalent plastic strain); with nonlocal_length, 1 =
-A = (1 - m) eps_p + m <eps_p> of the step start, from which c follows within the step
-(materials.regularisation, _vm_return_over).
+<eps_p>, the neighbourhood average (materials.regularisation); the step's return uses
+A = (1 - m) eps_p,n + m <eps_p> (over_nonlocal, _vm_return_over).
 """
 import math
 
@@ -28,7 +28,7 @@ import numpy as np
 from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
 from .linear_elastic import IsotropicElasticParameters, jaumann_tangent
 from .mohr_coulomb import _trial
-from .regularisation import NonlocalSoftening
+from .regularisation import NonlocalSoftening, over_nonlocal
 from .validation import check_positive, check_real
 
 __all__ = ["VonMises", "von_mises_stress_kernel", "von_mises_tangent_kernel"]
@@ -108,7 +108,8 @@ def _vm_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, c_u, c_res, H, nl,
         if nl < 0:
             dg, qtr, _ = _vm_return(S, state[p, 0], mu, c_u, c_res, H, s)
         else:
-            dg, qtr, _ = _vm_return_over(S, state[p, nl], mf, mu, c_u, c_res, H, s)
+            dg, qtr, _ = _vm_return_over(S, over_nonlocal(state, p, nl, mf), mf, mu, c_u,
+                                         c_res, H, s)
         fac = 1.0 - 3.0 * mu * dg / qtr if dg > 0.0 else 1.0
         for i in range(3):
             for j in range(3):
@@ -141,7 +142,8 @@ def _vm_tangent(idx, dF, sigma_old, state, dsig, lam, mu, c_u, c_res, H, nl, mf,
         if nl < 0:
             dg, qtr, Ht = _vm_return(S, state[p, 0], mu, c_u, c_res, H, s)
         else:
-            dg, qtr, Ht = _vm_return_over(S, state[p, nl], mf, mu, c_u, c_res, H, s)
+            dg, qtr, Ht = _vm_return_over(S, over_nonlocal(state, p, nl, mf), mf, mu, c_u,
+                                          c_res, H, s)
         alpha = 1.0
         beta = 0.0
         if dg > 0.0:
@@ -179,7 +181,7 @@ class VonMises(NonlocalSoftening, IsotropicElasticParameters):
     perfectly plastic), H <= 0 with 3 G + sqrt(3) H > 0 (no snap-back of the local return);
     nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: c follows the
     over-nonlocal average of eps_p (materials.regularisation).
-    History: state[:, 0] = eps_p (local), with nonlocal_length state[:, 1] = A (module doc).
+    History: state[:, 0] = eps_p (local), with nonlocal_length state[:, 1] = <eps_p> (module doc).
     """
 
     name = "VonMises"

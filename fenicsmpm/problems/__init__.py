@@ -13,4 +13,5 @@ solution and error measures, shared by the tests, the demos and the benchmark su
     localisation       softening shear layer and strip footing (regularisation)
     footing            Prandtl's smooth strip footing on Tresca soil (F-bar)
     granular_collapse  dry granular column on a rough base against Lube et al.'s (2005) laws
+    softening_slope    a softening Mohr-Coulomb slope that fails and runs out (run-out vs h)
 """

@@ -57,10 +57,34 @@ def granular_column(a, L0=1.0, cells=16, per_cell=2, integrator=None, comm=None,
     return sim, L0, H0
 
 
+def run_to_rest(sim, T, t_max, chunk, front, scale):
+    """Run sim in chunks of `chunk` T until the front (the largest particle x) has stopped:
+    after the peak of the mean speed, a chunk in which the front advanced by less than
+    0.5 % of `scale` and the mean speed is below 5 % of its peak; at most t_max T.  `front`:
+    the initial front.  Returns (history [(t / T, mean speed)], the error message of a
+    stopped run or None, t_rest / T or nan).  Collective."""
+    from mpi4py import MPI
+    p, comm = sim.particles, sim.comm
+    hist, error, t_rest = [(0.0, 0.0)], None, float("nan")
+    try:
+        while sim.t < t_max * T - 1e-9:
+            sim.run(t_end=min(sim.t + chunk * T, t_max * T), progress=False)
+            hist.append((sim.t / T, p.mean_speed()))
+            new = comm.allreduce(float(np.max(p.x[:, 0])) if len(p.x) else -np.inf, op=MPI.MAX)
+            speeds = [s for _, s in hist]
+            if (np.argmax(speeds) < len(speeds) - 1 and new - front < 5e-3 * scale
+                    and speeds[-1] < 0.05 * max(speeds)):
+                t_rest = sim.t / T
+                break
+            front = new
+    except (RuntimeError, FloatingPointError) as err:
+        error = str(err)
+    return hist, error, t_rest
+
+
 def collapse(a, cells=16, t_max=8.0, chunk=0.25, comm=None, **scene):
-    """Run granular_column(a, cells, **scene) in chunks of `chunk` T (T = sqrt(H0 / g)) until
-    the front has stopped: after the peak of the mean speed, a chunk in which the run-out grew
-    by less than 0.5 % of L0 and the mean speed is below 5 % of its peak; at most t_max T.
+    """Run granular_column(a, cells, **scene) to rest (run_to_rest, T = sqrt(H0 / g), front
+    scale L0).
     Returns a dict (the same on every rank): runout = (L_inf - L0) / L0 from the farthest
     particle centre, height = H_inf / L0 (the highest particle centre), their errors against
     lube_runout / lube_height, t_rest / T (nan if not at rest by t_max T), the mean-speed
@@ -75,21 +99,7 @@ def collapse(a, cells=16, t_max=8.0, chunk=0.25, comm=None, **scene):
     def gmax(x):
         return comm.allreduce(float(np.max(x)) if len(x) else -np.inf, op=MPI.MAX)
 
-    hist, front, error, t_rest = [(0.0, 0.0)], L0, None, float("nan")
-    try:
-        while sim.t < t_max * T - 1e-9:
-            sim.run(t_end=min(sim.t + chunk * T, t_max * T), progress=False)
-            hist.append((sim.t / T, p.mean_speed()))
-            new = gmax(p.x[:, 0])
-            speeds = [s for _, s in hist]
-            if (np.argmax(speeds) < len(speeds) - 1 and new - front < 5e-3 * L0
-                    and speeds[-1] < 0.05 * max(speeds)):
-                t_rest = sim.t / T
-                front = new
-                break
-            front = new
-    except (RuntimeError, FloatingPointError) as err:
-        error = str(err)
+    hist, error, t_rest = run_to_rest(sim, T, t_max, chunk, L0, L0)
     runout = (gmax(p.x[:, 0]) - L0) / L0
     height = gmax(p.x[:, 1]) / L0
     t, s = np.array(hist).T
