@@ -51,8 +51,10 @@ checkpoint (the average travels as a state column) repeats it exactly.
 
 Neighbour search: the points are binned into a uniform lattice of cell size h (the grid's
 smallest cell size) anchored at the mesh's lower corner, so on structured grids the bins are
-the grid's cells; a point scans the ceil(3 l / h) rings of bins around its own, O(n k) for k
-neighbours, and is skipped (A = 0) when no point with kappa != 0 lies in those bins. The
+the grid's cells; a point scans the bins that meet the disc (sphere) of radius 3 l around it
+(row by row: about pi/4 (pi/6) of the square (cube) of ceil(3 l / h) rings, the same pairs
+in the same order, so the same bits), O(n k) for k neighbours, and gets <kappa> = 0 when no
+point with kappa != 0 lies in those bins. The
 points are averaged in parallel chunks of RETURN_CHUNK (kernels.threads), the same bits on
 any number of threads.  Under
 MPI every rank receives the particles of the other ranks within 3 l of its particles'
@@ -87,16 +89,17 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
     (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`. The points
     are binned serially, then averaged in parallel chunks (the same bits on any number of
     threads)."""
-    b, nb, start, order, hot = _bins(x, kap, origin, hb)
+    nb, start, order, hot = _bins(x, kap, origin, hb)
     nc = particle_chunks(n_own, RETURN_CHUNK)
-    _average(x, vol, kap, n_own, b, nb, start, order, hot, (CUTOFF * length) ** 2,
-             1.0 / (length * length), int(math.ceil(CUTOFF * length / hb)), nc, out)
+    _average(x, vol, kap, n_own, nb, start, order, hot, (CUTOFF * length) ** 2,
+             1.0 / (length * length), int(math.ceil(CUTOFF * length / hb)), nc,
+             np.ascontiguousarray(origin, dtype=np.float64), float(hb), out)
 
 
 @numba.njit(cache=True)
 def _bins(x, kap, origin, hb):
-    """Bin indices b (n, 3), bin counts nb, the points sorted by bin (start, order) and the
-    bins holding a point with kap != 0 (hot)."""
+    """Bin counts nb per axis, the points sorted by bin (start, order) and the bins holding
+    a point with kap != 0 (hot)."""
     n, d = x.shape
     b = np.zeros((n, 3), dtype=np.int64)
     nb = np.ones(3, dtype=np.int64)
@@ -120,50 +123,94 @@ def _bins(x, kap, origin, hb):
         fill[lin[j]] += 1
         if kap[j] != 0.0:
             hot[lin[j]] = True
-    return b, nb, start, order, hot
+    return nb, start, order, hot
 
 
 @numba.njit(cache=True, parallel=PRANGE)
-def _average(x, vol, kap, n_own, b, nb, start, order, hot, rad2, il2, nr, nc, out):
+def _average(x, vol, kap, n_own, nb, start, order, hot, rad2, il2, nr, nc, origin, hb, out):
     """The averages of nonlocal_average, chunk c of nc on a thread each."""
+    d = x.shape[1]
+    room = (2 * nr + 3) ** d
     for c in numba.prange(nc):
         lo, hi = chunk(n_own, nc, c)
+        cells = np.empty(room, dtype=np.int64)
         for p in range(lo, hi):
-            out[p] = _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr)
+            k = _near_bins(x, p, origin, hb, rad2, nb, cells)
+            out[p] = _average_one(p, x, vol, kap, start, order, hot, rad2, il2, cells, k)
 
 
 @numba.njit(cache=True)
-def _average_one(p, x, vol, kap, b, nb, start, order, hot, rad2, il2, nr):
-    """<kap>_p of nonlocal_average: 0 when no point within reach has kap != 0."""
+def _span(xc, o, hb, half, n):
+    """The bins [lo, hi) of one axis that the interval (xc - half, xc + half) touches (widened
+    by round-off margins, so no point within half is missed)."""
+    m = half * (1.0 + 1e-12) + 1e-9 * hb
+    return (max(0, int(math.floor((xc - m - o) / hb))),
+            min(n, int(math.floor((xc + m - o) / hb)) + 1))
+
+
+@numba.njit(cache=True)
+def _gap2(xc, o, hb, c):
+    """Squared distance from xc to the slab of bin c on one axis (bin 0 reaches down to -inf,
+    as _bins clamps to it), less a round-off margin."""
+    lo = o + c * hb - 1e-9 * hb
+    hi = o + (c + 1) * hb + 1e-9 * hb
+    if xc > hi:
+        return (xc - hi) ** 2
+    if c > 0 and xc < lo:
+        return (lo - xc) ** 2
+    return 0.0
+
+
+@numba.njit(cache=True)
+def _near_bins(x, p, origin, hb, rad2, nb, cells):
+    """Writes to `cells` the bins that can hold a point within sqrt(rad2) of x_p, in the
+    order of their linear index, and returns their count: the rows of the disc (sphere)
+    only, not the square (cube) of bins around it, so about pi/4 (pi/6) of the bins."""
     d = x.shape[1]
-    lo = np.zeros(3, dtype=np.int64)
-    hi = np.ones(3, dtype=np.int64)
-    for k in range(d):
-        lo[k] = max(0, b[p, k] - nr)
-        hi[k] = min(nb[k], b[p, k] + nr + 1)
+    k = 0
+    lo0, hi0 = _span(x[p, 0], origin[0], hb, math.sqrt(rad2), nb[0])
+    for b0 in range(lo0, hi0):
+        g0 = _gap2(x[p, 0], origin[0], hb, b0)
+        if g0 >= rad2:
+            continue
+        lo1, hi1 = _span(x[p, 1], origin[1], hb, math.sqrt(rad2 - g0), nb[1]) if d > 1 else (0, 1)
+        for b1 in range(lo1, hi1):
+            g1 = g0 + (_gap2(x[p, 1], origin[1], hb, b1) if d > 1 else 0.0)
+            if g1 >= rad2:
+                continue
+            lo2, hi2 = (_span(x[p, 2], origin[2], hb, math.sqrt(rad2 - g1), nb[2]) if d > 2
+                        else (0, 1))
+            for b2 in range(lo2, hi2):
+                cells[k] = (b0 * nb[1] + b1) * nb[2] + b2
+                k += 1
+    return k
+
+
+@numba.njit(cache=True)
+def _average_one(p, x, vol, kap, start, order, hot, rad2, il2, cells, k):
+    """<kap>_p of nonlocal_average over the points of cells[:k]: 0 when none of them has
+    kap != 0."""
+    d = x.shape[1]
     near = False
-    for b0 in range(lo[0], hi[0]):
-        for b1 in range(lo[1], hi[1]):
-            for b2 in range(lo[2], hi[2]):
-                if hot[(b0 * nb[1] + b1) * nb[2] + b2]:
-                    near = True
+    for i in range(k):
+        if hot[cells[i]]:
+            near = True
+            break
     if not near:
         return 0.0
     num = 0.0
     den = 0.0
-    for b0 in range(lo[0], hi[0]):
-        for b1 in range(lo[1], hi[1]):
-            for b2 in range(lo[2], hi[2]):
-                c = (b0 * nb[1] + b1) * nb[2] + b2
-                for jj in range(start[c], start[c + 1]):
-                    q = order[jj]
-                    r2 = 0.0
-                    for k in range(d):
-                        r2 += (x[p, k] - x[q, k]) ** 2
-                    if r2 < rad2:
-                        w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
-                        num += w * kap[q]
-                        den += w
+    for i in range(k):
+        c = cells[i]
+        for jj in range(start[c], start[c + 1]):
+            q = order[jj]
+            r2 = 0.0
+            for j in range(d):
+                r2 += (x[p, j] - x[q, j]) ** 2
+            if r2 < rad2:
+                w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
+                num += w * kap[q]
+                den += w
     return num / den if den > 0.0 else kap[p]
 
 
