@@ -27,9 +27,10 @@ PLATEAU_FROM = 0.5
 ROWS = (("default", "auto", "auto"), ("mpm-fbar-on", "mpm", True), ("mpm-fbar-off", "mpm", False))
 
 
-def _row(h, name, shape, use_fbar, comm):
+def _row(h, name, shape, use_fbar, comm, **scene):
+    """One footing run (problems.footing.strip_footing(h, **scene)) as a bench record."""
     from ..problems.footing import strip_footing
-    sim, q, settlement = strip_footing(h=h, fbar=use_fbar, shape=shape, comm=comm)
+    sim, q, settlement = strip_footing(h=h, fbar=use_fbar, shape=shape, comm=comm, **scene)
     t0 = time.perf_counter()
     t, d, qs, every_step = [], [], [], []
     sim.observe(lambda s: every_step.append(float(q())), every=1)
@@ -44,7 +45,8 @@ def _row(h, name, shape, use_fbar, comm):
     plateau = float(np.mean(np.array(qs)[late]))
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=float(np.ptp(np.array(qs)[late])))
     cfg = dict(integrator="ExplicitContact", scheme="MUSL", shape=sim.shape, fbar=sim.fbar,
-               h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral", nu=0.49,
+               h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral", nu=scene.get("nu", 0.49),
+               mu=scene.get("mu", 0.0), soil=repr(scene["soil"]) if "soil" in scene else "VonMises",
                cells_under_half_width=0.5 / h)
     rec = common.make_record(f"h{h:g}-{name}", cfg,
                              sim.particles.n_global(), common.global_cells(sim),

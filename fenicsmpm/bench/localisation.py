@@ -3,7 +3,7 @@ regularisation (fenicsmpm.materials.regularisation) on the W5 strip footing push
 and on the periodic shear layer (fenicsmpm.problems.localisation), per cell size h
 (footing: h = 0.125 / 0.0625 / 0.03125 m, quick 0.25 / 0.125; layer: 0.01 / 0.005 m), and
 the run-out of a softening Mohr-Coulomb slope (fenicsmpm.problems.softening_slope, explicit
-defaults, l = 1.25 m; h = H/8, H/16, H/32, quick H/8, H/16).
+defaults, l = 1.25 m; h = H/8, H/16, H/32, H/64, quick H/8, H/16).
 
 Per run: the pressure-settlement (footing) or tau-u (layer) curve, its peak, the band width,
 Newton iterations (mean, max), completion, and the cost of the nonlocal averaging as a
@@ -20,7 +20,7 @@ from ..problems.localisation import shear_layer, strip_footing
 CASE = "localisation"
 FOOTING_L, LAYER_L, SLOPE_L = 0.25, 0.02, 1.25
 SIZES = {"quick": dict(footing=(0.25, 0.125), layer=(0.01, 0.005), slope=(8, 16)),
-         "full": dict(footing=(0.125, 0.0625, 0.03125), layer=(0.01, 0.005), slope=(8, 16, 32))}
+         "full": dict(footing=(0.125, 0.0625, 0.03125), layer=(0.01, 0.005), slope=(8, 16, 32, 64))}
 # the footing: its top particle row pushed by penalty (it keeps holding the soil after more
 # than a cell of settlement, unlike a node footing), the ghost penalty of poorly filled cells
 # (Newton at the footing edge), Newton with line search to rtol 1e-6 (in the softening band

@@ -8,7 +8,10 @@ half-width B/2 = 0.5 m and height 2 h (a body of particles, fm.ExplicitContact w
 pushed down at `speed_factor` c_s, reached smoothly (3 s^2 - 2 s^3) over the time of a
 quarter cell. Rollers on x = 0 and x = width, the base fixed; the mesh has 3 cell rows above
 the surface. The footing pressure is q = F_y / (B/2), F the contact force on the footing
-(integrator.body_contact_force)."""
+(integrator.body_contact_force).  `soil=` replaces the Tresca soil, e.g. a weightless
+fm.MohrCoulomb (limit pressure c N_c, Prandtl-Reissner: limit_pressure)."""
+import math
+
 import numpy as np
 
 B2 = 0.5          # footing half-width [m]
@@ -16,13 +19,28 @@ C_U = 10e3        # undrained strength [Pa]
 PRANDTL = 2.0 + np.pi
 
 
+def limit_pressure(soil):
+    """The limit pressure of a smooth strip footing on weightless soil: (2 + pi) c_u for
+    fm.VonMises (Prandtl 1920), c N_c for fm.MohrCoulomb with N_c = (N_q - 1) cot phi,
+    N_q = exp(pi tan phi) tan^2(45 deg + phi/2) (Reissner 1924; the classical solution,
+    associated flow psi = phi), (2 + pi) c at phi = 0."""
+    if hasattr(soil, "c_u"):
+        return PRANDTL * soil.c_u
+    phi = math.radians(soil.phi)
+    if phi == 0.0:
+        return PRANDTL * soil.c
+    n_q = math.exp(math.pi * math.tan(phi)) * math.tan(0.25 * math.pi + 0.5 * phi) ** 2
+    return soil.c * (n_q - 1.0) / math.tan(phi)
+
+
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
-                  shape="auto", fbar=None, mu=0.0, comm=None):
-    """The scene: (sim, pressure, settlement): pressure() -> q / ((2 + pi) c_u) of the last
-    step (from the global contact force; the same on every rank), settlement(t) the
+                  shape="auto", fbar=None, mu=0.0, soil=None, comm=None):
+    """The scene: (sim, pressure, settlement): pressure() -> q / limit_pressure(soil) of the
+    last step (from the global contact force; the same on every rank), settlement(t) the
     footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
     default); mu: the footing-soil friction coefficient (0: smooth; a rough footing, e.g.
-    mu = 10, has the same Prandtl limit on weightless Tresca soil)."""
+    mu = 10, has the same Prandtl limit on weightless Tresca soil); soil: the soil material
+    (None: the Tresca soil above with Poisson's ratio nu)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
@@ -31,7 +49,8 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     msh = mesh.create_rectangle(comm, [[0.0, 0.0], [width, ny * h]], [nx, ny],
                                 mesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
-    soil = fm.VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U)
+    soil = fm.VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U) if soil is None else soil
+    q_limit = limit_pressure(soil)
     pts = fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < depth)
     pts = pts + fm.Particles.fill(grid, fm.LinearElastic(E=10e6, nu=0.3, density=1800.0),
                                   per_cell=2, region=lambda x: (x[:, 0] < B2) & (x[:, 1] > depth)
@@ -54,5 +73,5 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
 
     def pressure():
-        return np.asarray(integ.body_contact_force)[1][1] / B2 / (PRANDTL * C_U)
+        return np.asarray(integ.body_contact_force)[1][1] / B2 / q_limit
     return sim, pressure, settlement
