@@ -98,20 +98,41 @@ def test_bad_input():
         explicit.move_particles(lambda x: x[:, 1] > H - 0.05, _push)
 
 
-def test_particle_footing_converges_on_prandtl():
-    """Prandtl's smooth footing on weightless Tresca soil, implicit, pushed through its top
+@pytest.mark.parametrize("rough", [False, True])
+def test_particle_footing_converges_on_prandtl(rough):
+    """Prandtl's footing on weightless Tresca soil, implicit, pushed through its top
     particle row (problems.localisation.strip_footing(footing="particles"), 30 mm in 30
-    steps): the mean pressure over the last third is 1.264 / 1.098 (2 + pi) c_u at 2 / 5
-    cells under B/2 (1.031 at 10 cells, docs/guide/choosing.md): it falls towards Prandtl's
-    value, the error 2.7 x smaller."""
+    steps), smooth (the row moves freely sideways) and rough (held sideways; the same limit
+    on weightless Tresca soil): the mean pressure over the last third is 1.264 / 1.098
+    (smooth) and 1.277 / 1.108 (rough) (2 + pi) c_u at 2 / 5 cells under B/2 (1.031 and
+    1.065 at 10 cells, docs/guide/choosing.md): it falls towards Prandtl's value, the error
+    2.6-2.7 x smaller."""
     from fenicsmpm.problems import localisation
     q = []
     for h in (0.25, 0.1):
         r = localisation.strip_footing(
             h, material=fm.VonMises(E=10e6, nu=0.49, density=1800.0, c_u=1e4), width=5.0,
-            depth=3.0, half_width=0.5, settlement=0.03, steps=30, footing="particles")
+            depth=3.0, half_width=0.5, settlement=0.03, steps=30, footing="particles",
+            rough=rough)
         assert r["completed"], r["stopped"]
         p = r["pressure"] / ((2.0 + np.pi) * 1e4)
         q.append(np.mean(p[len(p) * 2 // 3:]))
     assert 1.0 < q[1] < q[0] < 1.3, q
     assert q[1] - 1.0 < 0.45 * (q[0] - 1.0), q
+
+
+def test_rough_footing_needs_a_particle_footing():
+    from fenicsmpm.problems import localisation
+    with pytest.raises(ValueError, match="rough"):
+        localisation.strip_footing(0.5, footing="nodes", rough=True)
+
+
+def test_limit_pressures_of_the_footing_scene():
+    """problems.footing.limit_pressure: Prandtl's (2 + pi) c_u and Reissner's c N_c, against
+    the textbook bearing-capacity factors N_c(20 deg) = 14.83, N_c(30 deg) = 30.14."""
+    from fenicsmpm.problems.footing import limit_pressure
+    assert limit_pressure(fm.VonMises(E=1e7, nu=0.3, density=1.0, c_u=1e4)) == \
+        pytest.approx((2.0 + np.pi) * 1e4, rel=1e-14)
+    for phi, n_c in ((20.0, 14.83), (30.0, 30.14)):
+        mc = fm.MohrCoulomb(E=1e7, nu=0.3, density=1.0, phi=phi, c=1e4, psi=phi)
+        assert limit_pressure(mc) == pytest.approx(1e4 * n_c, rel=5e-4)

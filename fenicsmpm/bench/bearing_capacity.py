@@ -1,17 +1,21 @@
-"""Benchmark case `bearing-capacity`: Prandtl's smooth strip footing with the library's
-defaults (shape="auto", fbar="auto": cpGIMP with F-bar for the von Mises soil) and with the
-standard family with and without F-bar (issue 21; fenicsmpm.problems.footing, kernels.fbar).
+"""Benchmark case `bearing-capacity`: Prandtl's strip footing with the library's defaults
+(shape="auto", fbar="auto": cpGIMP with F-bar for the von Mises soil), with the standard
+family with and without F-bar, on soil of Poisson's ratio 0.3 and under a rough footing
+(issue 21; fenicsmpm.problems.footing, kernels.fbar).
 
     python -m fenicsmpm.bench bearing-capacity [--quick] [--out DIR]
 
-Rows h<h>-default, h<h>-mpm-fbar-on, h<h>-mpm-fbar-off at cell sizes h = 0.25, 0.1 and 0.05 m
-(2, 5 and 10 cells under the half-width; without F-bar only the first two; quick: h = 0.25
-only). The footing pressure q / (2 + pi) c_u is recorded
-every step of the push to t_end = 0.8 s (settlement = problems.footing's settlement(t)) and
-averaged over each 0.1 s (an explicit reaction rings from step to step). Metrics: plateau =
-the time mean of q from t = 0.5 s on, its spread (max - min of the 0.1 s means there) and the
-error of the plateau against Prandtl's (2 + pi) c_u. Writes out/bearing-capacity.json and
-out/bearing-capacity.png (pressure against settlement, one curve per row)."""
+Rows h<h>-<row> at cell sizes h = 0.25, 0.1 and 0.05 m (2, 5 and 10 cells under the
+half-width; without F-bar only the first two; quick: h = 0.25 only), ROWS: default (smooth,
+nu = 0.49), mpm-fbar-on, mpm-fbar-off, nu0.3 (defaults, nu = 0.3) and rough (defaults,
+footing-soil friction mu = 10: the soil sticks to the footing; weightless Tresca soil has the
+same limit (2 + pi) c_u under a rough footing).  The footing pressure q / (2 + pi) c_u is
+recorded every step of the push to t_end = 0.8 s (settlement = problems.footing's
+settlement(t)) and averaged over each 0.1 s (an explicit reaction rings from step to step).
+Metrics: plateau = the time mean of q from t = 0.5 s on, its spread (max - min of the 0.1 s
+means there) and the error of the plateau against Prandtl's (2 + pi) c_u. Writes
+out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
+curve per row)."""
 import os
 import time
 
@@ -24,7 +28,10 @@ T_END = 0.8
 PLATEAU_FROM = 0.5
 
 
-ROWS = (("default", "auto", "auto"), ("mpm-fbar-on", "mpm", True), ("mpm-fbar-off", "mpm", False))
+# name, shape, fbar, problems.footing.strip_footing options
+ROWS = (("default", "auto", "auto", {}), ("mpm-fbar-on", "mpm", True, {}),
+        ("mpm-fbar-off", "mpm", False, {}), ("nu0.3", "auto", "auto", dict(nu=0.3)),
+        ("rough", "auto", "auto", dict(mu=10.0)))
 
 
 def _row(h, name, shape, use_fbar, comm, **scene):
@@ -60,10 +67,10 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
     for h in ((0.25,) if quick else (0.25, 0.1, 0.05)):
-        for name, shape, use_fbar in ROWS:
+        for name, shape, use_fbar, scene in ROWS:
             if h < 0.1 and use_fbar is False:
                 continue
-            r = _row(h, name, shape, use_fbar, comm)
+            r = _row(h, name, shape, use_fbar, comm, **scene)
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} (2 + pi) c_u, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")

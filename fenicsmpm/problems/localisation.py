@@ -122,7 +122,8 @@ def prandtl_band_length(half_width):
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
                   half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
-                  material=None, line_search=0, footing="nodes", ghost=0.0, rtol=1e-8):
+                  material=None, line_search=0, footing="nodes", ghost=0.0, rtol=1e-8,
+                  rough=False):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
     size h, with empty cells above the surface for the heave) on weightless W5 clay, pushed quasi-statically to `settlement` in `steps` steps:
@@ -143,8 +144,13 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     footing="nodes" (default): the footing is the surface nodes with x <= B/2, valid while
     the settlement is well below h (the soil then leaves those nodes); "particles": the top
     particle row under B/2 is pushed down by penalty (Simulation.move_particles), so the
-    footing moves with the soil, p = particle reaction / (B/2)."""
+    footing moves with the soil, p = particle reaction / (B/2); rough=True holds those
+    particles horizontally as well (a rough footing; footing="particles" only)."""
     from mpi4py import MPI
+    if footing not in ("nodes", "particles"):
+        raise ValueError(f"strip_footing: 'footing' must be 'nodes' or 'particles', got {footing!r}")
+    if rough and footing != "particles":
+        raise ValueError("strip_footing: 'rough' needs footing='particles'")
     comm = MPI.COMM_WORLD if comm is None else comm
     top = depth + max(2.0 * h, 0.25)               # empty cells above the soil for the heave
     nx, ny = int(round(width / h)), int(round(top / h))
@@ -155,8 +161,6 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     pts = Particles.fill(grid, soil(length, m, softening) if material is None else material,
                          per_cell=2,
                          region=lambda x: x[:, 1] < depth)
-    if footing not in ("nodes", "particles"):
-        raise ValueError(f"strip_footing: 'footing' must be 'nodes' or 'particles', got {footing!r}")
     under = lambda x: (np.abs(x[:, 1] - depth) < tol) & (x[:, 0] <= half_width + tol)
     push = lambda x, t: np.column_stack([np.zeros(len(x)), np.full(len(x), -settlement * t)])
     qs = QuasiStatic(displacement=(lambda x, t: np.where(under(x)[:, None], push(x, t), 0.0))
@@ -171,7 +175,7 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
         own[: grid.n_owned_nodes] = under(grid.node_x[: grid.n_owned_nodes])
     else:       # the top particle row under B/2, pushed down by penalty (particle_motion)
         sim.move_particles(lambda x: (x[:, 1] > depth - 0.5 * h) & (x[:, 0] < half_width),
-                           push, components=[1])
+                           push, components=[0, 1] if rough else [1])
     p = sim.particles
     s, pr = [0.0], [0.0]
 
