@@ -7,7 +7,8 @@ pressure averaged over every step of t = 0.5-0.8 s (the quick `bearing-capacity`
 case). Exact: (2 + pi) c_u.
 Measured q / (2 + pi) c_u at h = 0.25 m: the defaults (cpGIMP and F-bar for von Mises) 1.165;
 standard family 1.065 with F-bar, 2.23 without (locking: still rising); the defaults with
-nu = 0.3 1.131, under a rough footing 1.349. The h series is in
+nu = 0.3 1.131, under a rough footing 1.349; on Mohr-Coulomb soil 1.019 (phi 20) and 0.960
+(phi 30) of c N_c. The h series is in
 docs/measured.md (`python -m fenicsmpm.bench bearing-capacity`).
 Also: F-bar leaves an isochoric increment alone and makes a cell's particles share one
 volume change; serial and under mpirun -n 2."""
@@ -38,6 +39,11 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     # rough contact drags the soil at the footing's edge node: high at 2 cells (1.349;
     # 1.158 at 5 cells, docs/guide/choosing.md)
     assert 1.0 < q["h0.25-rough"] < 1.5, q
+    # weightless associated Mohr-Coulomb (standard family, no F-bar: the defaults for it)
+    # against Reissner's c N_c: 1.019 (phi 20) and 0.960 (phi 30) over 110-276 mm, ringing
+    # +-17 % from window to window
+    assert abs(q["h0.25-mc20"] - 1.0) < 0.1, q
+    assert abs(q["h0.25-mc30"] - 1.0) < 0.1, q
     assert {r["name"]: (r["config"]["shape"], r["config"]["fbar"]) for r in doc["runs"]}[
         "h0.25-default"] == ("cpgimp", True)
 

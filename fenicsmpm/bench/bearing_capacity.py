@@ -9,11 +9,14 @@ Rows h<h>-<row> at cell sizes h = 0.25, 0.1 and 0.05 m (2, 5 and 10 cells under 
 half-width; without F-bar only the first two; quick: h = 0.25 only), ROWS: default (smooth,
 nu = 0.49), mpm-fbar-on, mpm-fbar-off, nu0.3 (defaults, nu = 0.3) and rough (defaults,
 footing-soil friction mu = 10: the soil sticks to the footing; weightless Tresca soil has the
-same limit (2 + pi) c_u under a rough footing).  The footing pressure q / (2 + pi) c_u is
-recorded every step of the push to t_end = 0.8 s (settlement = problems.footing's
-settlement(t)) and averaged over each 0.1 s (an explicit reaction rings from step to step).
-Metrics: plateau = the time mean of q from t = 0.5 s on, its spread (max - min of the 0.1 s
-means there) and the error of the plateau against Prandtl's (2 + pi) c_u. Writes
+same limit (2 + pi) c_u under a rough footing); mc20 and mc30: the defaults on weightless
+Mohr-Coulomb soil (c = 10 kPa, phi = psi = 20 and 30 degrees, nu = 0.3, 1 m of empty cells
+above the surface for the heave) against Reissner's c N_c.  The footing pressure over its
+limit (problems.footing.limit_pressure) is recorded every step of the push to t_end = 0.8 s
+(Mohr-Coulomb: 3 s; settlement = problems.footing's settlement(t)) and averaged over each
+0.1 s (an explicit reaction rings from step to step).  Metrics: plateau = the time mean of
+q / q_limit from t = 0.5 s (Mohr-Coulomb: 1.2 s) on, its spread (max - min of the 0.1 s
+means there) and the plateau's error. Writes
 out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
 curve per row)."""
 import os
@@ -28,27 +31,41 @@ T_END = 0.8
 PLATEAU_FROM = 0.5
 
 
-# name, shape, fbar, problems.footing.strip_footing options
-ROWS = (("default", "auto", "auto", {}), ("mpm-fbar-on", "mpm", True, {}),
-        ("mpm-fbar-off", "mpm", False, {}), ("nu0.3", "auto", "auto", dict(nu=0.3)),
-        ("rough", "auto", "auto", dict(mu=10.0)))
+MC_PUSH = (3.0, 1.2)      # Mohr-Coulomb rows: pushed to 3 s (276 mm), plateau from 1.2 s
 
 
-def _row(h, name, shape, use_fbar, comm, **scene):
-    """One footing run (problems.footing.strip_footing(h, **scene)) as a bench record."""
+def _mohr_coulomb(phi):
+    """Weightless Mohr-Coulomb soil with associated flow (Reissner's c N_c assumes it)."""
+    from ..materials import MohrCoulomb
+    return MohrCoulomb(E=10e6, nu=0.3, density=1800.0, phi=phi, c=10e3, psi=phi)
+
+
+# name, shape, fbar, problems.footing.strip_footing options, (t_end, plateau from) [s]
+ROWS = (("default", "auto", "auto", {}, (T_END, PLATEAU_FROM)),
+        ("mpm-fbar-on", "mpm", True, {}, (T_END, PLATEAU_FROM)),
+        ("mpm-fbar-off", "mpm", False, {}, (T_END, PLATEAU_FROM)),
+        ("nu0.3", "auto", "auto", dict(nu=0.3), (T_END, PLATEAU_FROM)),
+        ("rough", "auto", "auto", dict(mu=10.0), (T_END, PLATEAU_FROM)),
+        ("mc20", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0), MC_PUSH),
+        ("mc30", "auto", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH))
+
+
+def _row(h, name, shape, use_fbar, comm, push=(T_END, PLATEAU_FROM), **scene):
+    """One footing run (problems.footing.strip_footing(h, **scene)) pushed to push[0] s, its
+    plateau the mean from push[1] s on, as a bench record."""
     from ..problems.footing import strip_footing
     sim, q, settlement = strip_footing(h=h, fbar=use_fbar, shape=shape, comm=comm, **scene)
     t0 = time.perf_counter()
     t, d, qs, every_step = [], [], [], []
     sim.observe(lambda s: every_step.append(float(q())), every=1)
-    for k in range(int(round(T_END / 0.1))):
+    for k in range(int(round(push[0] / 0.1))):
         n0 = len(every_step)
         sim.run(t_end=0.1 * (k + 1))
         t.append(sim.t)
         d.append(settlement(sim.t))
         qs.append(float(np.mean(every_step[n0:])))
     wall = common.gmax(comm, time.perf_counter() - t0)
-    late = np.array(t) >= PLATEAU_FROM + 0.1 - 1e-9        # the windows after t = 0.5 s
+    late = np.array(t) >= push[1] + 0.1 - 1e-9        # the windows after t = push[1]
     plateau = float(np.mean(np.array(qs)[late]))
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=float(np.ptp(np.array(qs)[late])))
     cfg = dict(integrator="ExplicitContact", scheme="MUSL", shape=sim.shape, fbar=sim.fbar,
@@ -67,19 +84,19 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
     for h in ((0.25,) if quick else (0.25, 0.1, 0.05)):
-        for name, shape, use_fbar, scene in ROWS:
+        for name, shape, use_fbar, scene, push in ROWS:
             if h < 0.1 and use_fbar is False:
                 continue
-            r = _row(h, name, shape, use_fbar, comm, **scene)
+            r = _row(h, name, shape, use_fbar, comm, push, **scene)
             runs.append(r)
-            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} (2 + pi) c_u, spread "
+            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
     doc = common.result(CASE, runs, comm, quick=quick, targets=dict(plateau_error=0.03))
     common.write_result(doc, out, comm)
     common.print_table([dict(name=r["name"], particles=r["n_particles"], wall=r["wall_s"],
                              **{k: r["metrics"][k] for k in ("plateau", "plateau_error", "spread")})
                         for r in runs],
-                       [("run", "name"), ("particles", "particles"), ("q / (2+pi) c_u", "plateau"),
+                       [("run", "name"), ("particles", "particles"), ("q / q_limit", "plateau"),
                         ("error", "plateau_error"), ("spread", "spread"), ("wall s", "wall")],
                        comm=comm, title=common.table_title(doc))
     fig, axes = common.new_figure(size=(6.0, 4.2))
@@ -88,9 +105,9 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
         for r in runs:
             ax.plot(r["curve"]["settlement_mm"], r["curve"]["pressure"], "o-", ms=3,
                     label=r["name"])
-        ax.axhline(1.0, color="k", ls="--", lw=0.8, label="Prandtl (2 + pi) c_u")
+        ax.axhline(1.0, color="k", ls="--", lw=0.8, label="limit: (2 + pi) c_u, c N_c")
         ax.set_xlabel("settlement [mm]")
-        ax.set_ylabel("q / (2 + pi) c_u")
+        ax.set_ylabel("q / q_limit")
         ax.legend(fontsize=7)
     common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,
                        title=common.figure_title(doc, "Prandtl strip footing"))

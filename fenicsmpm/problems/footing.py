@@ -6,7 +6,7 @@ fm.VonMises(E = 10 MPa, nu, rho = 1800, c_u = 10 kPa) without weight; a rigid fo
 half-width B/2 = 0.5 m and height 2 h (a body of particles, fm.ExplicitContact with
 `rigid={1: v(t)}`, frictionless contact mu = 0: a smooth footing) stands on the surface and is
 pushed down at `speed_factor` c_s, reached smoothly (3 s^2 - 2 s^3) over the time of a
-quarter cell. Rollers on x = 0 and x = width, the base fixed; the mesh has 3 cell rows above
+quarter cell. Rollers on x = 0 and x = width, the base fixed; the mesh has 3 cell rows (or `room`) above
 the surface. The footing pressure is q = F_y / (B/2), F the contact force on the footing
 (integrator.body_contact_force).  `soil=` replaces the Tresca soil, e.g. a weightless
 fm.MohrCoulomb (limit pressure c N_c, Prandtl-Reissner: limit_pressure)."""
@@ -34,18 +34,20 @@ def limit_pressure(soil):
 
 
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
-                  shape="auto", fbar=None, mu=0.0, soil=None, comm=None):
+                  shape="auto", fbar=None, mu=0.0, soil=None, room=None, comm=None):
     """The scene: (sim, pressure, settlement): pressure() -> q / limit_pressure(soil) of the
     last step (from the global contact force; the same on every rank), settlement(t) the
     footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
     default); mu: the footing-soil friction coefficient (0: smooth; a rough footing, e.g.
     mu = 10, has the same Prandtl limit on weightless Tresca soil); soil: the soil material
-    (None: the Tresca soil above with Poisson's ratio nu)."""
+    (None: the Tresca soil above with Poisson's ratio nu); room: the height [m] of empty
+    cells above the surface, for the heave (None: 3 h)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
     comm = MPI.COMM_WORLD if comm is None else comm
-    nx, ny = int(round(width / h)), int(round(depth / h)) + 3
+    nx = int(round(width / h))
+    ny = int(round(depth / h)) + (3 if room is None else int(math.ceil(room / h - 1e-9)))
     msh = mesh.create_rectangle(comm, [[0.0, 0.0], [width, ny * h]], [nx, ny],
                                 mesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
