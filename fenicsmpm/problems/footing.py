@@ -6,8 +6,8 @@ fm.VonMises(E = 10 MPa, nu, rho = 1800, c_u = 10 kPa) without weight; a rigid fo
 half-width B/2 = 0.5 m and height 2 h (a body of particles, fm.ExplicitContact with
 `rigid={1: v(t)}`, frictionless contact mu = 0: a smooth footing) stands on the surface and is
 pushed down at `speed_factor` c_s, reached smoothly (3 s^2 - 2 s^3) over the time of a
-quarter cell. Rollers on x = 0 and x = width, the base fixed; the mesh has 3 cell rows (or `room`) above
-the surface. The footing pressure is q = F_y / (B/2), F the contact force on the footing
+quarter cell. Rollers on x = 0 and x = width, the base fixed; the mesh has 3 empty cell rows
+(or `room` metres of them) above the surface. The footing pressure is q = F_y / (B/2), F the contact force on the footing
 (integrator.body_contact_force).  `soil=` replaces the Tresca soil, e.g. a weightless
 fm.MohrCoulomb (limit pressure c N_c, Prandtl-Reissner: limit_pressure)."""
 import math
