@@ -136,3 +136,8 @@ def test_limit_pressures_of_the_footing_scene():
     for phi, n_c in ((20.0, 14.83), (30.0, 30.14)):
         mc = fm.MohrCoulomb(E=1e7, nu=0.3, density=1.0, phi=phi, c=1e4, psi=phi)
         assert limit_pressure(mc) == pytest.approx(1e4 * n_c, rel=5e-4)
+    with pytest.raises(ValueError, match="'soil'"):
+        limit_pressure(fm.LinearElastic(E=1e7, nu=0.3, density=1.0))
+    from fenicsmpm.problems.footing import strip_footing
+    with pytest.raises(ValueError, match="'room'"):
+        strip_footing(room=-1.0)

@@ -26,6 +26,9 @@ def limit_pressure(soil):
     associated flow psi = phi), (2 + pi) c at phi = 0."""
     if hasattr(soil, "c_u"):
         return PRANDTL * soil.c_u
+    if not hasattr(soil, "phi"):
+        raise ValueError(f"limit_pressure: 'soil' must be a VonMises or MohrCoulomb material, "
+                         f"got {type(soil).__name__}")
     phi = math.radians(soil.phi)
     if phi == 0.0:
         return PRANDTL * soil.c
@@ -45,6 +48,8 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
+    if room is not None and not room > 0.0:
+        raise ValueError(f"strip_footing: 'room' must be > 0 (metres of empty cells), got {room!r}")
     comm = MPI.COMM_WORLD if comm is None else comm
     nx = int(round(width / h))
     ny = int(round(depth / h)) + (3 if room is None else int(math.ceil(room / h - 1e-9)))
