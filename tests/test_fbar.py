@@ -191,3 +191,19 @@ def test_implicit_fbar_oedometer_is_exact(shape):
     err = np.abs(p.stress[:, 1, 1] / (-M * eps) - 1.0)
     worst = sim.comm.allreduce(float(err.max()) if len(p) else 0.0, op=MPI.MAX)
     assert worst < (1e-10 if shape == "mpm" else 2e-3), worst
+
+
+def test_limit_pressures_of_the_footing_scene():
+    """problems.footing.limit_pressure: Prandtl's (2 + pi) c_u and Reissner's c N_c, against
+    the textbook bearing-capacity factors N_c(20 deg) = 14.83, N_c(30 deg) = 30.14."""
+    from fenicsmpm.problems.footing import limit_pressure
+    assert limit_pressure(fm.VonMises(E=1e7, nu=0.3, density=1.0, c_u=1e4)) == \
+        pytest.approx((2.0 + np.pi) * 1e4, rel=1e-14)
+    for phi, n_c in ((20.0, 14.83), (30.0, 30.14)):
+        mc = fm.MohrCoulomb(E=1e7, nu=0.3, density=1.0, phi=phi, c=1e4, psi=phi)
+        assert limit_pressure(mc) == pytest.approx(1e4 * n_c, rel=5e-4)
+    with pytest.raises(ValueError, match="'soil'"):
+        limit_pressure(fm.LinearElastic(E=1e7, nu=0.3, density=1.0))
+    from fenicsmpm.problems.footing import strip_footing
+    with pytest.raises(ValueError, match="'room'"):
+        strip_footing(room=-1.0)

@@ -31,6 +31,7 @@ T_END = 0.8
 PLATEAU_FROM = 0.5
 
 
+PUSH = (T_END, PLATEAU_FROM)
 MC_PUSH = (3.0, 1.2)      # Mohr-Coulomb rows: pushed to 3 s (276 mm), plateau from 1.2 s
 
 
@@ -41,16 +42,16 @@ def _mohr_coulomb(phi):
 
 
 # name, shape, fbar, problems.footing.strip_footing options, (t_end, plateau from) [s]
-ROWS = (("default", "auto", "auto", {}, (T_END, PLATEAU_FROM)),
-        ("mpm-fbar-on", "mpm", True, {}, (T_END, PLATEAU_FROM)),
-        ("mpm-fbar-off", "mpm", False, {}, (T_END, PLATEAU_FROM)),
-        ("nu0.3", "auto", "auto", dict(nu=0.3), (T_END, PLATEAU_FROM)),
-        ("rough", "auto", "auto", dict(mu=10.0), (T_END, PLATEAU_FROM)),
+ROWS = (("default", "auto", "auto", {}, PUSH),
+        ("mpm-fbar-on", "mpm", True, {}, PUSH),
+        ("mpm-fbar-off", "mpm", False, {}, PUSH),
+        ("nu0.3", "auto", "auto", dict(nu=0.3), PUSH),
+        ("rough", "auto", "auto", dict(mu=10.0), PUSH),
         ("mc20", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0), MC_PUSH),
         ("mc30", "auto", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH))
 
 
-def _row(h, name, shape, use_fbar, comm, push=(T_END, PLATEAU_FROM), **scene):
+def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
     """One footing run (problems.footing.strip_footing(h, **scene)) pushed to push[0] s, its
     plateau the mean from push[1] s on, as a bench record."""
     from ..problems.footing import strip_footing
@@ -69,7 +70,8 @@ def _row(h, name, shape, use_fbar, comm, push=(T_END, PLATEAU_FROM), **scene):
     plateau = float(np.mean(np.array(qs)[late]))
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=float(np.ptp(np.array(qs)[late])))
     cfg = dict(integrator="ExplicitContact", scheme="MUSL", shape=sim.shape, fbar=sim.fbar,
-               h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral", nu=scene.get("nu", 0.49),
+               h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral",
+               nu=scene["soil"].nu if "soil" in scene else scene.get("nu", 0.49),
                mu=scene.get("mu", 0.0), soil=repr(scene["soil"]) if "soil" in scene else "VonMises",
                cells_under_half_width=0.5 / h)
     rec = common.make_record(f"h{h:g}-{name}", cfg,
