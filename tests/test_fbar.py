@@ -44,6 +44,9 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     # +-17 % from window to window
     assert abs(q["h0.25-mc20"] - 1.0) < 0.1, q
     assert abs(q["h0.25-mc30"] - 1.0) < 0.1, q
+    # the implicit W5 footing at peak strength, 2 cells under B/2: collapse pressure at
+    # 0.1 B measured 1.188 (1.027 at the seed's h = 0.0625 m: test_w5_collapse_pressure)
+    assert 1.0 < q["w5-h0.125"] < 1.3, q
     assert {r["name"]: (r["config"]["shape"], r["config"]["fbar"]) for r in doc["runs"]}[
         "h0.25-default"] == ("cpgimp", True)
 
@@ -160,6 +163,28 @@ def test_implicit_fbar_w5_footing_reaches_prandtl():
     late = q[True][15:]                                   # from 30 mm on
     assert abs(late.mean() - 1.0) < 0.10 and np.all(np.abs(late - 1.0) < 0.15), late
     assert q[False][-1] > 1.2 and q[False][-1] > q[False][20], q[False]
+
+
+def test_w5_collapse_pressure_within_5_percent_at_the_seeds_cell_size():
+    """Issue 21's W5 check: the seed 000 W5 footing at its peak strength (weightless von
+    Mises clay, nu = 0.41, E = 200 c_u, B/2 = 0.25 m; the implicit particle footing of the
+    bench bearing-capacity's w5 rows, library defaults: cpGIMP + F-bar) pushed 50 mm in 2 mm
+    steps.  Its collapse pressure (the pressure at 0.1 B,
+    problems.localisation.collapse_pressure) is within 5 % of (2 + pi) c_u at the seed's
+    h = 0.0625 m (measured 1.027; 1.028 at h = 0.03125 m, the bench's full row) and higher
+    at h = 0.125 m (1.188: 2 cells under B/2)."""
+    from fenicsmpm.bench.localisation import FOOTING
+    from fenicsmpm.problems.localisation import collapse_pressure, strip_footing
+    prandtl = 10e3 * (2.0 + np.pi)
+    q = {}
+    for h in (0.125, 0.0625):
+        r = strip_footing(h, softening=False, settlement=0.05, steps=25, **FOOTING)
+        assert r["completed"], r["stopped"]
+        q[h] = collapse_pressure(r["settlement"], r["pressure"]) / prandtl
+    assert abs(q[0.0625] - 1.0) < 0.05, q
+    assert q[0.125] > q[0.0625] > 0.95, q
+    with pytest.raises(ValueError, match="settlement"):
+        collapse_pressure(r["settlement"][:10], r["pressure"][:10])
 
 
 @pytest.mark.parametrize("shape", ["mpm", "cpgimp"])

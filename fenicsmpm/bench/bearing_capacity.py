@@ -18,7 +18,15 @@ limit (problems.footing.limit_pressure) is recorded every step of the push to t_
 q / q_limit from t = 0.5 s (Mohr-Coulomb: 1.2 s) on, its spread (max - min of the 0.1 s
 means there) and the plateau's error. Writes
 out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
-curve per row)."""
+curve per row).
+
+Rows w5-h<h>: the seed 000 W5 footing at its peak strength (issue 21; problems.localisation.
+strip_footing(h, softening=False) with the bench localisation's FOOTING options: weightless
+von Mises clay, c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit QuasiStatic, the
+top particle row under B/2 pushed 50 mm in 25 steps; h = 0.125 / 0.0625 / 0.03125 m, quick
+0.125) against (2 + pi) c_u: its pressure has a knee near the limit and then keeps rising
+as the footing embeds, so plateau = the collapse pressure at 10 % of B
+(problems.localisation.collapse_pressure), spread = max - min over the last 10 mm."""
 import os
 import time
 
@@ -33,6 +41,8 @@ PLATEAU_FROM = 0.5
 
 PUSH = (T_END, PLATEAU_FROM)
 MC_PUSH = (3.0, 1.2)      # Mohr-Coulomb rows: pushed to 3 s (276 mm), plateau from 1.2 s
+W5_SIZES = {"quick": (0.125,), "full": (0.125, 0.0625, 0.03125)}
+W5_STEPS = 25             # 2 mm steps to 0.1 B = 50 mm, as the bench localisation's 100 mm in 50
 
 
 def _mohr_coulomb(phi):
@@ -81,6 +91,32 @@ def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
     return rec
 
 
+def _w5_row(h, comm):
+    """The W5 footing at peak strength pushed to 0.1 B, as a bench record (module docstring)."""
+    from ..problems.footing import PRANDTL
+    from ..problems.localisation import W5_SOIL, collapse_pressure, strip_footing
+    from .localisation import FOOTING
+    r = strip_footing(h, softening=False, settlement=0.05, steps=W5_STEPS, comm=comm, **FOOTING)
+    q = r["pressure"] / (PRANDTL * W5_SOIL["c_u"])
+    s = r["settlement"]
+    if r["completed"]:
+        collapse = collapse_pressure(s, q)
+        spread = float(np.ptp(q[s >= s[-1] - 0.01 - 1e-12]))
+    else:
+        collapse = spread = float("nan")
+    m = dict(plateau=collapse, plateau_error=collapse - 1.0, spread=spread,
+             newton_mean=float(np.mean(r["newton"] or [0])), newton_max=int(max(r["newton"] or [0])))
+    cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=h,
+               dt=1.0 / W5_STEPS, ppc=4, cell_type="quadrilateral", nu=W5_SOIL["nu"], mu=0.0,
+               soil="W5 VonMises, peak strength", cells_under_half_width=0.25 / h,
+               collapse="pressure at settlement 0.1 B", **FOOTING)
+    rec = common.make_record(f"w5-h{h:g}", cfg, r["n_particles"], r["n_particles"] // 4,
+                             len(r["newton"]), r["wall_s"], m)
+    rec["curve"] = dict(settlement_mm=(1e3 * s).tolist(), pressure=q.tolist())
+    rec["stopped"] = r["stopped"]
+    return rec
+
+
 def run(quick=False, out="bench-results", comm=None, verbose=True):
     comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
@@ -93,8 +129,14 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
+    for h in W5_SIZES["quick" if quick else "full"]:
+        r = _w5_row(h, comm)
+        runs.append(r)
+        say(f"{r['name']}: collapse pressure {r['metrics']['plateau']:.3f} (2 + pi) c_u, "
+            f"{r['wall_s']:.1f} s")
     doc = common.result(CASE, runs, comm, quick=quick,
-                        targets=dict(plateau_error=0.03, plateau_error_mohr_coulomb=0.05))
+                        targets=dict(plateau_error=0.03, plateau_error_mohr_coulomb=0.05,
+                                     plateau_error_w5=0.05))
     common.write_result(doc, out, comm)
     common.print_table([dict(name=r["name"], particles=r["n_particles"], wall=r["wall_s"],
                              **{k: r["metrics"][k] for k in ("plateau", "plateau_error", "spread")})

@@ -21,7 +21,8 @@ from ..materials import VonMises
 from ..particles import Particles
 from ..simulation import Simulation
 
-__all__ = ["W5_SOIL", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length"]
+__all__ = ["W5_SOIL", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length",
+           "collapse_pressure"]
 
 W5_SOIL = dict(E=2.0e6, nu=0.41, density=1000.0, c_u=10.0e3, c_res=3.0e3, H=-140.0e3)
 
@@ -118,6 +119,20 @@ def prandtl_band_length(half_width):
     b (half model): active wedge side b sqrt(2), a circular fan arc of radius b sqrt(2) over
     pi/2, passive wedge side b sqrt(2): L = b sqrt(2) (2 + pi/2)."""
     return half_width * math.sqrt(2.0) * (2.0 + 0.5 * math.pi)
+
+
+def collapse_pressure(settlement, pressure, half_width=0.25):
+    """The collapse pressure of a footing whose pressure keeps rising as it embeds (the W5
+    footing at its peak strength: a knee near Prandtl's (2 + pi) c_u, then a rise that shrinks
+    with h): the pressure at a settlement of 10 % of the footing width B = 2 half_width, the
+    usual failure criterion for footings without a peak, read off the curve by linear
+    interpolation.  Raises a ValueError if the curve stops short of 0.1 B."""
+    s_c = 0.2 * half_width
+    settlement = np.asarray(settlement, dtype=float)
+    if not len(settlement) or settlement[-1] < s_c * (1.0 - 1e-9):
+        raise ValueError(f"collapse_pressure: 'settlement' must reach 0.1 B = {s_c:g} m, "
+                         f"got up to {settlement[-1] if len(settlement) else None!r} m")
+    return float(np.interp(s_c, settlement, np.asarray(pressure, dtype=float)))
 
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
