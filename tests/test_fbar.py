@@ -36,7 +36,7 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     assert q["h0.25-mpm-fbar-off"] > 1.8, q
     assert abs(q["h0.25-default"] - 1.0) < 0.20, q
     assert abs(q["h0.25-nu0.3"] - 1.0) < 0.20, q             # measured 1.131
-    # rough contact drags the soil at the footing's edge node: high at 2 cells (1.349;
+    # rough contact sticks a cell row of soil to the footing: high at 2 cells (1.349;
     # 1.158 at 5 cells, docs/guide/choosing.md)
     assert 1.0 < q["h0.25-rough"] < 1.5, q
     # weightless associated Mohr-Coulomb (standard family, no F-bar: the defaults for it)
