@@ -165,6 +165,29 @@ def test_implicit_fbar_w5_footing_reaches_prandtl():
     assert q[False][-1] > 1.2 and q[False][-1] > q[False][20], q[False]
 
 
+def test_rough_and_smooth_contact_footings():
+    """Tresca soil has the same limit under a smooth and a rough footing. With penalty
+    contact (node-to-segment, problems.footing.strip_footing(algorithm="penalty")) the two
+    agree at h = 0.25 m (measured 1.234 / 1.228 (2 + pi) c_u); the multi-velocity rough
+    contact sticks the soil at both node rows the footing's particles reach, so the upper
+    row carries far more of the load than under the smooth footing
+    (problems.footing.contact_load_shares; measured 0.316 / 0.741 at h = 0.25 m, 0.042 /
+    0.441 at h = 0.1 m)."""
+    from mpi4py import MPI
+    from fenicsmpm.bench import bearing_capacity as bc
+    from fenicsmpm.problems.footing import contact_load_shares
+    comm = MPI.COMM_WORLD
+    q = [bc._row(0.25, "p", "auto", "auto", comm, bc.PUSH, mu=mu, algorithm="penalty")["metrics"]["plateau"]
+         for mu in (0.0, 10.0)]
+    assert abs(q[0] - q[1]) < 0.02 * q[0] and 1.0 < q[1] < 1.35, q
+    upper = []
+    for mu in (0.0, 10.0):
+        x, share, _ = contact_load_shares(0.25, mu=mu)
+        assert abs(comm.allreduce(float(share.sum())) - 1.0) < 1e-12
+        upper.append(comm.allreduce(float(share[np.isclose(x[:, 1], 3.0)].sum())))
+    assert upper[1] > 2.0 * upper[0], upper
+
+
 def test_w5_collapse_pressure_within_5_percent_at_the_seeds_cell_size():
     """Issue 21's W5 check: the seed 000 W5 footing at its peak strength (weightless von
     Mises clay, nu = 0.41, E = 200 c_u, B/2 = 0.25 m; the implicit particle footing of the

@@ -37,14 +37,17 @@ def limit_pressure(soil):
 
 
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
-                  shape="auto", fbar=None, mu=0.0, soil=None, room=None, comm=None):
+                  shape="auto", fbar=None, mu=0.0, soil=None, room=None, comm=None,
+                  algorithm="multi-velocity"):
     """The scene: (sim, pressure, settlement): pressure() -> q / limit_pressure(soil) of the
     last step (from the global contact force; the same on every rank), settlement(t) the
     footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
     default); mu: the footing-soil friction coefficient (0: smooth; a rough footing, e.g.
     mu = 10, has the same Prandtl limit on weightless Tresca soil); soil: the soil material
     (None: the Tresca soil above with Poisson's ratio nu); room: the height [m] of empty
-    cells above the surface, for the heave (None: 3 h)."""
+    cells above the surface, for the heave (None: 3 h); algorithm: fm.ExplicitContact's
+    ("penalty": node-to-segment with k_n = rho c_p^2 / h of the soil, the soil surface and
+    the footing's outline as polylines, vertices h/2 apart)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
@@ -74,7 +77,14 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
         return speed * (ramp * (s ** 3 - 0.5 * s ** 4) + max(t - ramp, 0.0))
 
     kw = {} if fbar is None else dict(fbar=fbar)
-    integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity})
+    if algorithm == "penalty":
+        from ..contact.penalty import line, rectangle
+        integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity}, algorithm="penalty",
+                                   penalty=dict(k_n=soil.density * soil.p_wave_speed ** 2 / h))
+        integ.add_polyline(0, line((width, depth), (0.0, depth), 2 * nx))
+        integ.add_polyline(1, rectangle((0.0, depth), (B2, depth + 2 * h), 0.5 * h), closed=True)
+    else:
+        integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity}, algorithm=algorithm)
     sim = fm.Simulation(grid, pts, integ, dt="auto", shape=shape, **kw)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], width), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
@@ -82,3 +92,26 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     def pressure():
         return np.asarray(integ.body_contact_force)[1][1] / B2 / q_limit
     return sim, pressure, settlement
+
+
+def contact_load_shares(h=0.1, t_from=0.5, t_end=0.8, comm=None, **scene):
+    """Where the footing's load goes: strip_footing(h, **scene) pushed to t_end; the soil's
+    vertical nodal contact force (integrator.contact_force) averaged over the steps after
+    t_from, as shares of its global total.  Returns (x, share, q): this rank's owned nodes
+    that carry load (coordinates, share) and the mean q / limit over those steps (collective)."""
+    from mpi4py import MPI
+    comm = MPI.COMM_WORLD if comm is None else comm
+    sim, pressure, _ = strip_footing(h=h, comm=comm, **scene)
+    g = sim.grid
+    f, q = np.zeros(g.n_nodes), []
+
+    def record(s):
+        if s.t > t_from:
+            f[:] += s.integrator.contact_force[:, 0, 1]
+            q.append(pressure())
+    sim.observe(record, every=1)
+    sim.run(t_end=t_end, progress=False)
+    own = f[: g.n_owned_nodes]
+    total = comm.allreduce(float(own.sum()))
+    keep = np.abs(own) > 1e-9 * abs(total)
+    return g.node_x[: g.n_owned_nodes][keep], own[keep] / total, float(np.mean(q))
