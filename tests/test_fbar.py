@@ -44,6 +44,10 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     # +-17 % from window to window
     assert abs(q["h0.25-mc20"] - 1.0) < 0.1, q
     assert abs(q["h0.25-mc30"] - 1.0) < 0.1, q
+    # the implicit particle footing, 30 mm in 60 steps: 1.261 (nu 0.49) / 1.224 (nu 0.3) /
+    # 1.273 (rough) at 2 cells (1.052 / 1.023 / 1.054 at 10 cells, docs/guide/choosing.md)
+    for row in ("implicit", "implicit-nu0.3", "implicit-rough"):
+        assert 1.0 < q[f"h0.25-{row}"] < 1.35, q
     # the implicit W5 footing at peak strength, 2 cells under B/2: collapse pressure at
     # 0.1 B measured 1.188 (1.027 at the seed's h = 0.0625 m: test_w5_collapse_pressure)
     assert 1.0 < q["w5-h0.125"] < 1.3, q

@@ -104,8 +104,8 @@ def test_particle_footing_converges_on_prandtl(rough):
     particle row (problems.localisation.strip_footing(footing="particles"), 30 mm in 30
     steps), smooth (the row moves freely sideways) and rough (held sideways; the same limit
     on weightless Tresca soil): the mean pressure over the last third is 1.264 / 1.098
-    (smooth) and 1.277 / 1.108 (rough) (2 + pi) c_u at 2 / 5 cells under B/2 (1.052 and
-    1.065 at 10 cells, docs/guide/choosing.md): it falls towards Prandtl's value, the error
+    (smooth) and 1.277 / 1.108 (rough) (2 + pi) c_u at 2 / 5 cells under B/2 (pushed in 60
+    steps: 1.052 and 1.054 at 10 cells, bench bearing-capacity's implicit rows): it falls towards Prandtl's value, the error
     2.6-2.7 x smaller."""
     from fenicsmpm.problems import localisation
     q = []

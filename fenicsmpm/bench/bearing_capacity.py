@@ -20,6 +20,12 @@ means there) and the plateau's error. Writes
 out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
 curve per row).
 
+Rows h<h>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
+rough: the footing row held sideways as well) under the implicit particle footing
+(problems.localisation.strip_footing(footing="particles"), fm.QuasiStatic with line_search=6,
+rtol=1e-6, library defaults otherwise: the standard family with F-bar), B/2 = 0.5 m, pushed
+30 mm in 60 steps; plateau = the mean over the last third of the push, spread = its max - min.
+
 Rows w5-h<h>: the seed 000 W5 footing at its peak strength (issue 21; problems.localisation.
 strip_footing(h, softening=False) with the bench localisation's FOOTING options: weightless
 von Mises clay, c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit QuasiStatic, the
@@ -91,6 +97,36 @@ def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
     return rec
 
 
+IMPLICIT_ROWS = (("implicit", dict(nu=0.49)), ("implicit-nu0.3", dict(nu=0.3)),
+                 ("implicit-rough", dict(nu=0.49, rough=True)))
+IMPLICIT_STEPS = 60
+
+
+def _implicit_row(h, name, comm, nu=0.49, rough=False):
+    """Prandtl's footing under the implicit particle footing, as a bench record (module
+    docstring)."""
+    from ..materials import VonMises
+    from ..problems.footing import B2, C_U, PRANDTL
+    from ..problems.localisation import strip_footing
+    opts = dict(footing="particles", line_search=6, rtol=1e-6, rough=rough)
+    r = strip_footing(h, material=VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U), width=5.0,
+                      depth=3.0, half_width=B2, settlement=0.03, steps=IMPLICIT_STEPS, comm=comm,
+                      **opts)
+    q = r["pressure"] / (PRANDTL * C_U)
+    late = q[1:][2 * IMPLICIT_STEPS // 3:] if r["completed"] else np.array([np.nan])
+    m = dict(plateau=float(np.mean(late)), plateau_error=float(np.mean(late)) - 1.0,
+             spread=float(np.ptp(late)), newton_mean=float(np.mean(r["newton"] or [0])),
+             newton_max=int(max(r["newton"] or [0])))
+    cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=h,
+               dt=1.0 / IMPLICIT_STEPS, ppc=4, cell_type="quadrilateral", nu=nu,
+               mu=10.0 if rough else 0.0, soil="VonMises", cells_under_half_width=B2 / h, **opts)
+    rec = common.make_record(f"h{h:g}-{name}", cfg, r["n_particles"], r["n_particles"] // 4,
+                             len(r["newton"]), r["wall_s"], m)
+    rec["curve"] = dict(settlement_mm=(1e3 * r["settlement"]).tolist(), pressure=q.tolist())
+    rec["stopped"] = r["stopped"]
+    return rec
+
+
 def _w5_row(h, comm):
     """The W5 footing at peak strength pushed to 0.1 B, as a bench record (module docstring)."""
     from ..problems.footing import PRANDTL
@@ -129,6 +165,10 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
+        for name, scene in IMPLICIT_ROWS:
+            r = _implicit_row(h, name, comm, **scene)
+            runs.append(r)
+            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, {r['wall_s']:.1f} s")
     for h in W5_SIZES["quick" if quick else "full"]:
         r = _w5_row(h, comm)
         runs.append(r)
