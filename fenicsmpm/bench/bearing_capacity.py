@@ -114,13 +114,19 @@ def _implicit_row(h, name, comm, nu=0.49, rough=False):
                       **opts)
     q = r["pressure"] / (PRANDTL * C_U)
     late = q[1:][2 * IMPLICIT_STEPS // 3:] if r["completed"] else np.array([np.nan])
-    m = dict(plateau=float(np.mean(late)), plateau_error=float(np.mean(late)) - 1.0,
-             spread=float(np.ptp(late)), newton_mean=float(np.mean(r["newton"] or [0])),
-             newton_max=int(max(r["newton"] or [0])))
-    cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=h,
-               dt=1.0 / IMPLICIT_STEPS, ppc=4, cell_type="quadrilateral", nu=nu,
-               mu=10.0 if rough else 0.0, soil="VonMises", cells_under_half_width=B2 / h, **opts)
-    rec = common.make_record(f"h{h:g}-{name}", cfg, r["n_particles"], r["n_particles"] // 4,
+    return _quasi_static_record(f"h{h:g}-{name}", r, q, float(np.mean(late)), float(np.ptp(late)),
+                                dt=1.0 / IMPLICIT_STEPS, nu=nu, soil="VonMises",
+                                cells_under_half_width=B2 / h, **opts)
+
+
+def _quasi_static_record(name, r, q, plateau, spread, **config):
+    """The bench record of an implicit footing run r (problems.localisation.strip_footing's
+    result) with its pressure q / limit, plateau and spread; config: the run's settings."""
+    m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=spread,
+             newton_mean=float(np.mean(r["newton"] or [0])), newton_max=int(max(r["newton"] or [0])))
+    cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=r["h"],
+               ppc=4, cell_type="quadrilateral", **config)
+    rec = common.make_record(name, cfg, r["n_particles"], r["n_particles"] // 4,
                              len(r["newton"]), r["wall_s"], m)
     rec["curve"] = dict(settlement_mm=(1e3 * r["settlement"]).tolist(), pressure=q.tolist())
     rec["stopped"] = r["stopped"]
@@ -140,17 +146,10 @@ def _w5_row(h, comm):
         spread = float(np.ptp(q[s >= s[-1] - 0.01 - 1e-12]))
     else:
         collapse = spread = float("nan")
-    m = dict(plateau=collapse, plateau_error=collapse - 1.0, spread=spread,
-             newton_mean=float(np.mean(r["newton"] or [0])), newton_max=int(max(r["newton"] or [0])))
-    cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=h,
-               dt=1.0 / W5_STEPS, ppc=4, cell_type="quadrilateral", nu=W5_SOIL["nu"], mu=0.0,
-               soil="W5 VonMises, peak strength", cells_under_half_width=0.25 / h,
-               collapse="pressure at settlement 0.1 B", **FOOTING)
-    rec = common.make_record(f"w5-h{h:g}", cfg, r["n_particles"], r["n_particles"] // 4,
-                             len(r["newton"]), r["wall_s"], m)
-    rec["curve"] = dict(settlement_mm=(1e3 * s).tolist(), pressure=q.tolist())
-    rec["stopped"] = r["stopped"]
-    return rec
+    return _quasi_static_record(f"w5-h{h:g}", r, q, collapse, spread, dt=1.0 / W5_STEPS,
+                                nu=W5_SOIL["nu"], mu=0.0, soil="W5 VonMises, peak strength",
+                                cells_under_half_width=0.25 / h,
+                                collapse="pressure at settlement 0.1 B", **FOOTING)
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
