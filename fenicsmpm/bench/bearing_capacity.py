@@ -105,11 +105,10 @@ IMPLICIT_STEPS = 60
 def _implicit_row(h, name, comm, nu=0.49, rough=False):
     """Prandtl's footing under the implicit particle footing, as a bench record (module
     docstring)."""
-    from ..materials import VonMises
-    from ..problems.footing import B2, C_U, PRANDTL
+    from ..problems.footing import B2, C_U, PRANDTL, tresca_soil
     from ..problems.localisation import strip_footing
     opts = dict(footing="particles", line_search=6, rtol=1e-6, rough=rough)
-    r = strip_footing(h, material=VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U), width=5.0,
+    r = strip_footing(h, material=tresca_soil(nu), width=5.0,
                       depth=3.0, half_width=B2, settlement=0.03, steps=IMPLICIT_STEPS, comm=comm,
                       **opts)
     q = r["pressure"] / (PRANDTL * C_U)

@@ -19,6 +19,13 @@ C_U = 10e3        # undrained strength [Pa]
 PRANDTL = 2.0 + np.pi
 
 
+def tresca_soil(nu=0.49):
+    """Prandtl's soil: fm.VonMises(E = 10 MPa, nu, rho = 1800 kg/m^3, c_u = C_U), used
+    weightless (module docstring)."""
+    from ..materials import VonMises
+    return VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U)
+
+
 def limit_pressure(soil):
     """The limit pressure of a smooth strip footing on weightless soil: (2 + pi) c_u for
     fm.VonMises (Prandtl 1920), c N_c for fm.MohrCoulomb with N_c = (N_q - 1) cot phi,
@@ -59,7 +66,7 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     msh = mesh.create_rectangle(comm, [[0.0, 0.0], [width, ny * h]], [nx, ny],
                                 mesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
-    soil = fm.VonMises(E=10e6, nu=nu, density=1800.0, c_u=C_U) if soil is None else soil
+    soil = tresca_soil(nu) if soil is None else soil
     q_limit = limit_pressure(soil)
     pts = fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < depth)
     pts = pts + fm.Particles.fill(grid, fm.LinearElastic(E=10e6, nu=0.3, density=1800.0),
