@@ -27,9 +27,9 @@ rtol=1e-6, library defaults otherwise: the standard family with F-bar), B/2 = 0.
 30 mm in 60 steps; plateau = the mean over the last third of the push, spread = its max - min.
 
 Rows w5-h<h>: the seed 000 W5 footing at its peak strength (issue 21; problems.localisation.
-strip_footing(h, softening=False) with the bench localisation's FOOTING options: weightless
-von Mises clay, c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit QuasiStatic, the
-top particle row under B/2 pushed 50 mm in 25 steps; h = 0.125 / 0.0625 / 0.03125 m, quick
+strip_footing(h, softening=False, footing="particles"), the library's defaults otherwise:
+weightless von Mises clay, c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit
+QuasiStatic, the top particle row under B/2 pushed 50 mm in 25 steps; h = 0.125 / 0.0625 / 0.03125 m, quick
 0.125) against (2 + pi) c_u: its pressure has a knee near the limit and then keeps rising
 as the footing embeds, so plateau = the collapse pressure at 10 % of B
 (problems.localisation.collapse_pressure), spread = max - min over the last 10 mm."""
@@ -136,8 +136,8 @@ def _w5_row(h, comm):
     """The W5 footing at peak strength pushed to 0.1 B, as a bench record (module docstring)."""
     from ..problems.footing import PRANDTL
     from ..problems.localisation import W5_SOIL, collapse_pressure, strip_footing
-    from .localisation import FOOTING
-    r = strip_footing(h, softening=False, settlement=0.05, steps=W5_STEPS, comm=comm, **FOOTING)
+    r = strip_footing(h, softening=False, settlement=0.05, steps=W5_STEPS, comm=comm,
+                      footing="particles")
     q = r["pressure"] / (PRANDTL * W5_SOIL["c_u"])
     s = r["settlement"]
     if r["completed"]:
@@ -148,7 +148,7 @@ def _w5_row(h, comm):
     return _quasi_static_record(f"w5-h{h:g}", r, q, collapse, spread, dt=1.0 / W5_STEPS,
                                 nu=W5_SOIL["nu"], mu=0.0, soil="W5 VonMises, peak strength",
                                 cells_under_half_width=0.25 / h,
-                                collapse="pressure at settlement 0.1 B", **FOOTING)
+                                collapse="pressure at settlement 0.1 B", footing="particles")
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
