@@ -20,11 +20,13 @@ means there) and the plateau's error. Writes
 out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
 curve per row).
 
-Rows h<h>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
+Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
 (problems.localisation.strip_footing(footing="particles"), fm.QuasiStatic with line_search=6,
 rtol=1e-6, library defaults otherwise: the standard family with F-bar), B/2 = 0.5 m, pushed
 30 mm in 60 steps; plateau = the mean over the last third of the push, spread = its max - min.
+Their cell size h_i = implicit_cell_size(h) puts the footing's edge at a cell centre: 2.5 /
+5.5 / 10.5 cells under B/2 (h_i = 0.2, 0.0909, 0.0476 m).
 
 Rows w5-h<h>: the seed 000 W5 footing at its peak strength (issue 21; problems.localisation.
 strip_footing(h, softening=False, footing="particles"), the library's defaults otherwise:
@@ -102,9 +104,18 @@ IMPLICIT_ROWS = (("implicit", dict(nu=0.49)), ("implicit-nu0.3", dict(nu=0.3)),
 IMPLICIT_STEPS = 60
 
 
+def implicit_cell_size(h):
+    """The implicit rows' cell size next to the explicit rows' h: B/2 / h_i = round(B/2 / h)
+    + 1/2 cells, so that the edge of the particle footing lies at a cell centre, where it is
+    exactly B/2 wide (problems.localisation.under_cells; with the edge on a grid line it acts
+    half a cell wider: 1.261 / 1.095 / 1.052 (2 + pi) c_u at 2 / 5 / 10 cells)."""
+    from ..problems.footing import B2
+    return B2 / (round(B2 / h) + 0.5)
+
+
 def _implicit_row(h, name, comm, nu=0.49, rough=False):
     """Prandtl's footing under the implicit particle footing, as a bench record (module
-    docstring)."""
+    docstring); h: the cell size (implicit_cell_size(h) in the bench)."""
     from ..problems.footing import B2, C_U, PRANDTL, tresca_soil
     from ..problems.localisation import strip_footing
     opts = dict(footing="particles", line_search=6, rtol=1e-6, rough=rough)
@@ -113,7 +124,7 @@ def _implicit_row(h, name, comm, nu=0.49, rough=False):
                       **opts)
     q = r["pressure"] / (PRANDTL * C_U)
     late = q[1:][2 * IMPLICIT_STEPS // 3:] if r["completed"] else np.array([np.nan])
-    return _quasi_static_record(f"h{h:g}-{name}", r, q, float(np.mean(late)), float(np.ptp(late)),
+    return _quasi_static_record(f"h{h:.3g}-{name}", r, q, float(np.mean(late)), float(np.ptp(late)),
                                 dt=1.0 / IMPLICIT_STEPS, nu=nu, soil="VonMises",
                                 cells_under_half_width=B2 / h, **opts)
 
@@ -164,7 +175,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
         for name, scene in IMPLICIT_ROWS:
-            r = _implicit_row(h, name, comm, **scene)
+            r = _implicit_row(implicit_cell_size(h), name, comm, **scene)
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, {r['wall_s']:.1f} s")
     for h in W5_SIZES["quick" if quick else "full"]:
