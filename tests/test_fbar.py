@@ -52,6 +52,13 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     # the implicit W5 footing at peak strength, 2 cells under B/2: collapse pressure at
     # 0.1 B measured 1.167 (1.011 at the seed's h = 0.0625 m: test_w5_collapse_pressure)
     assert 1.0 < q["w5-h0.125"] < 1.3, q
+    # ... but that footing acts half a cell wider (edge on a grid line): per unit of its
+    # effective half-width 0.3125 m the collapse pressure is 0.934; the implicit Prandtl rows
+    # act on B/2 exactly
+    m = {r["name"]: r["metrics"] for r in doc["runs"]}
+    assert m["w5-h0.125"]["half_width_effective"] == pytest.approx(0.3125)
+    assert 0.85 < m["w5-h0.125"]["plateau_effective_width"] < 1.0, m["w5-h0.125"]
+    assert m["h0.2-implicit"]["half_width_effective"] == pytest.approx(0.5)
     assert {r["name"]: (r["config"]["shape"], r["config"]["fbar"]) for r in doc["runs"]}[
         "h0.25-default"] == ("cpgimp", True)
 

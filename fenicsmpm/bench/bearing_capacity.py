@@ -34,7 +34,11 @@ weightless von Mises clay, c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, i
 QuasiStatic, the top particle row under B/2 pushed 50 mm in 25 steps; h = 0.125 / 0.0625 / 0.03125 m, quick
 0.125) against (2 + pi) c_u: its pressure has a knee near the limit and then keeps rising
 as the footing embeds, so plateau = the collapse pressure at 10 % of B
-(problems.localisation.collapse_pressure), spread = max - min over the last 10 mm."""
+(problems.localisation.collapse_pressure), spread = max - min over the last 10 mm.  The
+footing's edge lies on a grid line there, so it acts half a cell wider than B/2:
+plateau_effective_width is the collapse pressure per unit of its effective half-width
+(problems.localisation.effective_half_width; 0.934 / 0.899 / 0.932 against 1.167 / 1.011 /
+0.990 per unit of B/2)."""
 import os
 import time
 
@@ -131,8 +135,13 @@ def _implicit_row(h, name, comm, nu=0.49, rough=False):
 
 def _quasi_static_record(name, r, q, plateau, spread, **config):
     """The bench record of an implicit footing run r (problems.localisation.strip_footing's
-    result) with its pressure q / limit, plateau and spread; config: the run's settings."""
+    result) with its pressure q / limit, plateau and spread; config: the run's settings.
+    Also the footing's effective half-width (problems.localisation.effective_half_width)
+    and the plateau per unit of it."""
+    hw = config["cells_under_half_width"] * r["h"]
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=spread,
+             half_width_effective=r["half_width_effective"],
+             plateau_effective_width=plateau * hw / r["half_width_effective"],
              newton_mean=float(np.mean(r["newton"] or [0])), newton_max=int(max(r["newton"] or [0])))
     cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=r["h"],
                ppc=4, cell_type="quadrilateral", **config)
