@@ -105,8 +105,9 @@ def test_particle_footing_converges_on_prandtl(rough):
     steps), smooth (the row moves freely sideways) and rough (held sideways; the same limit
     on weightless Tresca soil): the mean pressure over the last third is 1.264 / 1.098
     (smooth) and 1.277 / 1.108 (rough) (2 + pi) c_u at 2 / 5 cells under B/2 (pushed in 60
-    steps: 1.052 and 1.054 at 10 cells, bench bearing-capacity's implicit rows): it falls towards Prandtl's value, the error
-    2.6-2.7 x smaller."""
+    steps: 1.052 and 1.054 at 10 cells; with the footing's edge at a cell centre 0.996 and
+    1.007 at 10.5 cells, bench bearing-capacity's implicit rows): it falls towards
+    Prandtl's value, the error 2.6-2.7 x smaller."""
     from fenicsmpm.problems import localisation
     q = []
     for h in (0.25, 0.1):

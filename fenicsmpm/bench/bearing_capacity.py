@@ -138,10 +138,9 @@ def _quasi_static_record(name, r, q, plateau, spread, **config):
     result) with its pressure q / limit, plateau and spread; config: the run's settings.
     Also the footing's effective half-width (problems.localisation.effective_half_width)
     and the plateau per unit of it."""
-    hw = config["cells_under_half_width"] * r["h"]
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=spread,
              half_width_effective=r["half_width_effective"],
-             plateau_effective_width=plateau * hw / r["half_width_effective"],
+             plateau_effective_width=plateau * r["half_width"] / r["half_width_effective"],
              newton_mean=float(np.mean(r["newton"] or [0])), newton_max=int(max(r["newton"] or [0])))
     cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=r["h"],
                ppc=4, cell_type="quadrilateral", **config)

@@ -230,6 +230,7 @@ class _Newton:
         t1 = time.perf_counter()
         R, rnorm, fint, reaction, sig = newton_residual(du)
         r0 = rnorm
+        diverged = self.DIVERGED * max(r0, 1e-300)
         T["solve"] += time.perf_counter() - t1
         dnorm = np.inf
         best = (np.inf, 0)                      # the smallest |R|/|f| so far and its iteration
@@ -242,10 +243,10 @@ class _Newton:
             best = min(best, (rnorm / scale, it))
             # diverged: |R| DIVERGED times its initial value (the internal forces of the
             # diverging iterate then dominate |f|, so |R|/|f| alone would read about 1)
-            if it == self.max_iter or rnorm > self.DIVERGED * max(r0, 1e-300):
+            if it == self.max_iter or rnorm > diverged:
                 why = (f"in {self.max_iter} iterations" if it == self.max_iter else
-                       f"(diverged at iteration {it}: |R| = {rnorm / max(r0, 1e-300):.3g} x its "
-                       f"initial value)")
+                       f"(diverged at iteration {it}: |R| = {self.DIVERGED * rnorm / diverged:.3g}"
+                       f" x its initial value)")
                 raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not converge "
                                    f"{why} (|R|/|f| = {rnorm / scale:.3e}; closest "
                                    f"{best[0]:.3e} at iteration {best[1]})")

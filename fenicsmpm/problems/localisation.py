@@ -144,7 +144,13 @@ def under_cells(x, h, half_width):
     its edge on a grid line (half_width / h = n) half a cell wider (measured: q too high by
     about h / (2 half_width) in bench bearing-capacity's implicit rows, 1.095 (2 + pi) c_u at
     5 cells, 1.052 at 10; with the edge at a cell centre 1.004 at 5.5 cells)."""
-    return (np.floor(x[:, 0] / h + 1e-9) + 0.5) * h < half_width - 1e-6 * h
+    return np.floor(x[:, 0] / h + 1e-9) < pushed_columns(h, half_width)
+
+
+def pushed_columns(h, half_width):
+    """The number k of grid columns [i h, (i + 1) h] whose centre lies under a footing
+    x < half_width: (i + 1/2) h < half_width for i < k."""
+    return math.ceil(half_width / h - 0.5 - 1e-6)
 
 
 def effective_half_width(h, half_width, footing="particles"):
@@ -158,10 +164,7 @@ def effective_half_width(h, half_width, footing="particles"):
     1.002 with the edge on a grid line (2 / 5 / 10 cells) and 1.002 / 0.997 / 1.000 with the
     edge at a cell centre with every particle under the footing pushed (2.5 / 3.5 / 5.5
     cells)."""
-    if footing == "particles":
-        k = math.ceil(half_width / h - 0.5 - 1e-6)
-    else:
-        k = math.floor(half_width / h + 1e-6)
+    k = pushed_columns(h, half_width) if footing == "particles" else math.floor(half_width / h + 1e-6)
     return (k + 0.5) * h
 
 
@@ -243,6 +246,7 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     band = (_gsum(comm, float(np.sum(p.V * eps))) / (emax * prandtl_band_length(half_width))
             if emax > 0 else 0.0)
     return dict(h=h, length=length, settlement=np.array(s), pressure=np.array(pr),
+                half_width=half_width,
                 half_width_effective=effective_half_width(h, half_width, footing),
                 completed=done, stopped=msg, band_width=band, eps_max=emax,
                 newton=list(qs.iterations), wall_s=wall,
