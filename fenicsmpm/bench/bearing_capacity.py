@@ -29,16 +29,15 @@ Their cell size h_i = implicit_cell_size(h) puts the footing's edge at a cell ce
 5.5 / 10.5 cells under B/2 (h_i = 0.2, 0.0909, 0.0476 m).
 
 Rows w5-h<h>: the seed 000 W5 footing at its peak strength (issue 21; problems.localisation.
-strip_footing(h, softening=False, footing="particles"), the library's defaults otherwise:
-weightless von Mises clay, c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit
-QuasiStatic, the top particle row under B/2 pushed 50 mm in 25 steps; h = 0.125 / 0.0625 / 0.03125 m, quick
-0.125) against (2 + pi) c_u: its pressure has a knee near the limit and then keeps rising
-as the footing embeds, so plateau = the collapse pressure at 10 % of B
-(problems.localisation.collapse_pressure), spread = max - min over the last 10 mm.  The
-footing's edge lies on a grid line there, so it acts half a cell wider than B/2:
-plateau_effective_width is the collapse pressure per unit of its effective half-width
-(problems.localisation.effective_half_width; 0.934 / 0.899 / 0.932 against 1.167 / 1.011 /
-0.990 per unit of B/2)."""
+strip_footing(h, softening=False, **bench.localisation.FOOTING): weightless von Mises clay,
+c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit QuasiStatic with the particle
+footing, ghost=0.01, line_search=6, rtol=1e-6 as in the bench localisation), pushed 0.16 B =
+80 mm in 40 steps, at h = w5_cell_size(n) = B/2 / (n + 1/2) for n = 2 / 4 / 8 (quick: 2): the
+footing's edge at a cell centre, where it is exactly B/2 wide (with its edge on a grid line,
+the seed's h = 0.0625 m, it acts half a cell wider: problems.localisation.under_cells).
+plateau = the collapse pressure / (2 + pi) c_u, the mean over settlements 0.12-0.16 B
+(problems.localisation.collapse_pressure: the soft clay reaches its limit near 0.14 B),
+spread = its max - min there; pressure_at_0.1B the usual footing criterion, for comparison."""
 import os
 import time
 
@@ -53,8 +52,8 @@ PLATEAU_FROM = 0.5
 
 PUSH = (T_END, PLATEAU_FROM)
 MC_PUSH = (3.0, 1.2)      # Mohr-Coulomb rows: pushed to 3 s (276 mm), plateau from 1.2 s
-W5_SIZES = {"quick": (0.125,), "full": (0.125, 0.0625, 0.03125)}
-W5_STEPS = 25             # 2 mm steps to 0.1 B = 50 mm, as the bench localisation's 100 mm in 50
+W5_CELLS = {"quick": (2,), "full": (2, 4, 8)}    # n + 1/2 cells under B/2: w5_cell_size(n)
+W5_PUSH, W5_STEPS = 0.16, 40    # pushed 0.16 B = 80 mm in steps of 2 mm
 
 
 def _mohr_coulomb(phi):
@@ -151,23 +150,33 @@ def _quasi_static_record(name, r, q, plateau, spread, **config):
     return rec
 
 
+def w5_cell_size(n):
+    """The W5 rows' cell size: B/2 / h = n + 1/2 cells, the footing's edge at a cell centre,
+    where the particle footing is exactly B/2 wide (implicit_cell_size)."""
+    from ..problems.localisation import W5_HALF_WIDTH
+    return W5_HALF_WIDTH / (n + 0.5)
+
+
 def _w5_row(h, comm):
-    """The W5 footing at peak strength pushed to 0.1 B, as a bench record (module docstring)."""
+    """The W5 footing at peak strength pushed to 0.16 B, as a bench record (module docstring)."""
     from ..problems.footing import PRANDTL
-    from ..problems.localisation import W5_SOIL, collapse_pressure, strip_footing
-    r = strip_footing(h, softening=False, settlement=0.05, steps=W5_STEPS, comm=comm,
-                      footing="particles")
+    from ..problems.localisation import W5_HALF_WIDTH, W5_SOIL, collapse_pressure, strip_footing
+    from .localisation import FOOTING
+    r = strip_footing(h, softening=False, settlement=W5_PUSH * 2.0 * W5_HALF_WIDTH,
+                      steps=W5_STEPS, comm=comm, **FOOTING)
     q = r["pressure"] / (PRANDTL * W5_SOIL["c_u"])
     s = r["settlement"]
     if r["completed"]:
         collapse = collapse_pressure(s, q)
-        spread = float(np.ptp(q[s >= s[-1] - 0.01 - 1e-12]))
+        spread = float(np.ptp(q[s >= 0.75 * s[-1] - 1e-12]))
     else:
         collapse = spread = float("nan")
-    return _quasi_static_record(f"w5-h{h:g}", r, q, collapse, spread, dt=1.0 / W5_STEPS,
-                                nu=W5_SOIL["nu"], mu=0.0, soil="W5 VonMises, peak strength",
-                                cells_under_half_width=0.25 / h,
-                                collapse="pressure at settlement 0.1 B", footing="particles")
+    m = _quasi_static_record(f"w5-h{h:.3g}", r, q, collapse, spread, dt=1.0 / W5_STEPS,
+                             nu=W5_SOIL["nu"], mu=0.0, soil="W5 VonMises, peak strength",
+                             cells_under_half_width=W5_HALF_WIDTH / h,
+                             collapse="mean pressure over settlements 0.12-0.16 B", **FOOTING)
+    m["metrics"]["pressure_at_0.1B"] = float(np.interp(0.2 * W5_HALF_WIDTH, s, q))
+    return m
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
@@ -186,8 +195,8 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             r = _implicit_row(implicit_cell_size(h), name, comm, **scene)
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, {r['wall_s']:.1f} s")
-    for h in W5_SIZES["quick" if quick else "full"]:
-        r = _w5_row(h, comm)
+    for n in W5_CELLS["quick" if quick else "full"]:
+        r = _w5_row(w5_cell_size(n), comm)
         runs.append(r)
         say(f"{r['name']}: collapse pressure {r['metrics']['plateau']:.3f} (2 + pi) c_u, "
             f"{r['wall_s']:.1f} s")

@@ -21,10 +21,11 @@ from ..materials import VonMises
 from ..particles import Particles
 from ..simulation import Simulation
 
-__all__ = ["W5_SOIL", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length",
+__all__ = ["W5_SOIL", "W5_HALF_WIDTH", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length",
            "collapse_pressure"]
 
 W5_SOIL = dict(E=2.0e6, nu=0.41, density=1000.0, c_u=10.0e3, c_res=3.0e3, H=-140.0e3)
+W5_HALF_WIDTH = 0.25          # the W5 footing's half-width B/2 [m]
 
 
 def soil(length=None, m=2.0, softening=True):
@@ -121,18 +122,26 @@ def prandtl_band_length(half_width):
     return half_width * math.sqrt(2.0) * (2.0 + 0.5 * math.pi)
 
 
-def collapse_pressure(settlement, pressure, half_width=0.25):
-    """The collapse pressure of a footing whose pressure keeps rising as it embeds (the W5
-    footing at its peak strength: a knee near Prandtl's (2 + pi) c_u, then a rise that shrinks
-    with h): the pressure at a settlement of 10 % of the footing width B = 2 half_width, the
-    usual failure criterion for footings without a peak, read off the curve by linear
-    interpolation.  Raises a ValueError if the curve stops short of 0.1 B."""
-    s_c = 0.2 * half_width
+def collapse_pressure(settlement, pressure, half_width=W5_HALF_WIDTH, window=(0.12, 0.16)):
+    """The collapse pressure of the W5 footing at its peak strength: the mean pressure over
+    the settlements window[0] B to window[1] B (B = 2 half_width), the plateau of its
+    load-settlement curve.  The small-strain curve of an elastic-perfectly plastic soil scales
+    with c_u / E: the W5 clay made ten times stiffer (E = 2000 c_u) reaches its limit at
+    0.014-0.016 B (2.5 cells under B/2, footing="particles"), so the W5 clay (E = 200 c_u)
+    reaches it near 0.15 B; at 0.1 B it is still below, and further on the embedding
+    footing lifts the curve (bench bearing-capacity's w5 rows, docs/guide/choosing.md).  The
+    mean is over the curve interpolated linearly.
+    Raises a ValueError if the curve stops short of window[1] B."""
+    if not 0.0 <= window[0] < window[1]:
+        raise ValueError(f"collapse_pressure: 'window' must be (lo, hi) with 0 <= lo < hi, "
+                         f"got {window!r}")
+    lo, hi = (2.0 * half_width * w for w in window)
     settlement = np.asarray(settlement, dtype=float)
-    if not len(settlement) or settlement[-1] < s_c * (1.0 - 1e-9):
-        raise ValueError(f"collapse_pressure: 'settlement' must reach 0.1 B = {s_c:g} m, "
+    if not len(settlement) or settlement[-1] < hi * (1.0 - 1e-9):
+        raise ValueError(f"collapse_pressure: 'settlement' must reach {window[1]:g} B = {hi:g} m, "
                          f"got up to {settlement[-1] if len(settlement) else None!r} m")
-    return float(np.interp(s_c, settlement, np.asarray(pressure, dtype=float)))
+    s = np.linspace(lo, hi, 201)
+    return float(np.mean(np.interp(s, settlement, np.asarray(pressure, dtype=float))))
 
 
 def under_cells(x, h, half_width):
@@ -169,7 +178,7 @@ def effective_half_width(h, half_width, footing="particles"):
 
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
-                  half_width=0.25, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
+                  half_width=W5_HALF_WIDTH, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
                   material=None, line_search=0, footing="nodes", ghost=0.0, rtol=1e-8,
                   rough=False):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
