@@ -205,11 +205,10 @@ def test_w5_collapse_pressure_within_5_percent():
     (problems.localisation.collapse_pressure), is within 5 % of (2 + pi) c_u (measured
     1.029; 0.973 at 2.5 cells, the quick bench row).  At 0.1 B the soft clay is still below
     its limit (0.941)."""
-    from fenicsmpm.bench.bearing_capacity import w5_cell_size
     from fenicsmpm.bench.localisation import FOOTING
-    from fenicsmpm.problems.localisation import collapse_pressure, strip_footing
+    from fenicsmpm.problems.localisation import centred_cell_size, collapse_pressure, strip_footing
     prandtl = 10e3 * (2.0 + np.pi)
-    h = w5_cell_size(4)
+    h = centred_cell_size(0.25, 4)
     r = strip_footing(h, softening=False, settlement=0.08, steps=40, **FOOTING)
     assert r["completed"], r["stopped"]
     assert r["half_width_effective"] == pytest.approx(0.25, rel=1e-12)
@@ -281,8 +280,13 @@ def test_particle_footing_pushes_the_columns_whose_centre_is_under_it():
 def test_effective_half_width_of_the_discrete_footing():
     """problems.localisation.effective_half_width: to the centre of the first cell column the
     footing does not move."""
-    from fenicsmpm.problems.localisation import effective_half_width
+    from fenicsmpm.problems.localisation import centred_cell_size, effective_half_width
     assert effective_half_width(0.2, 0.5) == pytest.approx(0.5)              # edge at a centre
+    for n in (2, 4, 8):
+        h = centred_cell_size(0.25, n)
+        assert effective_half_width(h, 0.25) == pytest.approx(0.25, rel=1e-12)
+    with pytest.raises(ValueError, match="'n'"):
+        centred_cell_size(0.25, -1)
     assert effective_half_width(0.25, 0.5) == pytest.approx(0.625)           # on a grid line
     assert effective_half_width(0.25, 0.5, "nodes") == pytest.approx(0.625)
     assert effective_half_width(0.0625, 0.25, "nodes") == pytest.approx(0.28125)

@@ -32,9 +32,10 @@ Rows w5-h<h>: the seed 000 W5 footing at its peak strength (issue 21; problems.l
 strip_footing(h, softening=False, **bench.localisation.FOOTING): weightless von Mises clay,
 c_u = 10 kPa, nu = 0.41, E = 200 c_u, B/2 = 0.25 m, implicit QuasiStatic with the particle
 footing, ghost=0.01, line_search=6, rtol=1e-6 as in the bench localisation), pushed 0.16 B =
-80 mm in 40 steps, at h = w5_cell_size(n) = B/2 / (n + 1/2) for n = 2 / 4 / 8 (quick: 2): the
-footing's edge at a cell centre, where it is exactly B/2 wide (with its edge on a grid line,
-the seed's h = 0.0625 m, it acts half a cell wider: problems.localisation.under_cells).
+80 mm in 40 steps, at h = problems.localisation.centred_cell_size(B/2, n) = B/2 / (n + 1/2)
+for n = 2 / 4 / 8 (quick: 2): the footing's edge at a cell centre, where it is exactly B/2
+wide (with its edge on a grid line, the seed's h = 0.0625 m, it acts half a cell wider:
+problems.localisation.under_cells).
 plateau = the collapse pressure / (2 + pi) c_u, the mean over settlements 0.12-0.16 B
 (problems.localisation.collapse_pressure: the soft clay reaches its limit near 0.14 B),
 spread = its max - min there; pressure_at_0.1B the usual footing criterion, for comparison."""
@@ -52,7 +53,7 @@ PLATEAU_FROM = 0.5
 
 PUSH = (T_END, PLATEAU_FROM)
 MC_PUSH = (3.0, 1.2)      # Mohr-Coulomb rows: pushed to 3 s (276 mm), plateau from 1.2 s
-W5_CELLS = {"quick": (2,), "full": (2, 4, 8)}    # n + 1/2 cells under B/2: w5_cell_size(n)
+W5_CELLS = {"quick": (2,), "full": (2, 4, 8)}    # n + 1/2 cells under B/2 (centred_cell_size)
 W5_PUSH, W5_STEPS = 0.16, 40    # pushed 0.16 B = 80 mm in steps of 2 mm
 
 
@@ -113,7 +114,8 @@ def implicit_cell_size(h):
     exactly B/2 wide (problems.localisation.under_cells; with the edge on a grid line it acts
     half a cell wider: 1.261 / 1.095 / 1.052 (2 + pi) c_u at 2 / 5 / 10 cells)."""
     from ..problems.footing import B2
-    return B2 / (round(B2 / h) + 0.5)
+    from ..problems.localisation import centred_cell_size
+    return centred_cell_size(B2, round(B2 / h))
 
 
 def _implicit_row(h, name, comm, nu=0.49, rough=False):
@@ -150,13 +152,6 @@ def _quasi_static_record(name, r, q, plateau, spread, **config):
     return rec
 
 
-def w5_cell_size(n):
-    """The W5 rows' cell size: B/2 / h = n + 1/2 cells, the footing's edge at a cell centre,
-    where the particle footing is exactly B/2 wide (implicit_cell_size)."""
-    from ..problems.localisation import W5_HALF_WIDTH
-    return W5_HALF_WIDTH / (n + 0.5)
-
-
 def _w5_row(h, comm):
     """The W5 footing at peak strength pushed to 0.16 B, as a bench record (module docstring)."""
     from ..problems.footing import PRANDTL
@@ -180,6 +175,7 @@ def _w5_row(h, comm):
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
+    from ..problems.localisation import W5_HALF_WIDTH, centred_cell_size
     comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
@@ -196,7 +192,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, {r['wall_s']:.1f} s")
     for n in W5_CELLS["quick" if quick else "full"]:
-        r = _w5_row(w5_cell_size(n), comm)
+        r = _w5_row(centred_cell_size(W5_HALF_WIDTH, n), comm)
         runs.append(r)
         say(f"{r['name']}: collapse pressure {r['metrics']['plateau']:.3f} (2 + pi) c_u, "
             f"{r['wall_s']:.1f} s")

@@ -21,7 +21,7 @@ from ..materials import VonMises
 from ..particles import Particles
 from ..simulation import Simulation
 
-__all__ = ["W5_SOIL", "W5_HALF_WIDTH", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length",
+__all__ = ["W5_SOIL", "W5_HALF_WIDTH", "centred_cell_size", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length",
            "collapse_pressure"]
 
 W5_SOIL = dict(E=2.0e6, nu=0.41, density=1000.0, c_u=10.0e3, c_res=3.0e3, H=-140.0e3)
@@ -154,6 +154,15 @@ def under_cells(x, h, half_width):
     about h / (2 half_width) in bench bearing-capacity's implicit rows, 1.095 (2 + pi) c_u at
     5 cells, 1.052 at 10; with the edge at a cell centre 1.004 at 5.5 cells)."""
     return np.floor(x[:, 0] / h + 1e-9) < pushed_columns(h, half_width)
+
+
+def centred_cell_size(half_width, n):
+    """The cell size h = half_width / (n + 1/2): n + 1/2 cells under the half-width, the
+    footing's edge at a cell centre, where the particle footing (under_cells) is exactly
+    half_width wide."""
+    if not n >= 0:
+        raise ValueError(f"centred_cell_size: 'n' must be >= 0, got {n!r}")
+    return half_width / (n + 0.5)
 
 
 def pushed_columns(h, half_width):
