@@ -278,8 +278,8 @@ def test_particle_footing_pushes_the_columns_whose_centre_is_under_it():
 
 
 def test_effective_half_width_of_the_discrete_footing():
-    """problems.localisation.effective_half_width: to the centre of the first cell column the
-    footing does not move."""
+    """problems.localisation.effective_half_width: the particle footing acts to the centre of
+    the first cell column it does not move, the node footing to its last node."""
     from fenicsmpm.problems.localisation import centred_cell_size, effective_half_width
     assert effective_half_width(0.2, 0.5) == pytest.approx(0.5)              # edge at a centre
     for n in (2, 4, 8):

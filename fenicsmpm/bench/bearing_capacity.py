@@ -54,7 +54,8 @@ PLATEAU_FROM = 0.5
 PUSH = (T_END, PLATEAU_FROM)
 MC_PUSH = (3.0, 1.2)      # Mohr-Coulomb rows: pushed to 3 s (276 mm), plateau from 1.2 s
 W5_CELLS = {"quick": (2,), "full": (2, 4, 8)}    # n + 1/2 cells under B/2 (centred_cell_size)
-W5_PUSH, W5_STEPS = 0.16, 40    # pushed 0.16 B = 80 mm in steps of 2 mm
+W5_WINDOW = (0.12, 0.16)        # collapse pressure: the mean over 0.12-0.16 B (collapse_pressure)
+W5_STEPS = 40                   # pushed to W5_WINDOW[1] B = 80 mm in steps of 2 mm
 
 
 def _mohr_coulomb(phi):
@@ -137,11 +138,10 @@ def _implicit_row(h, name, comm, nu=0.49, rough=False):
 def _quasi_static_record(name, r, q, plateau, spread, **config):
     """The bench record of an implicit footing run r (problems.localisation.strip_footing's
     result) with its pressure q / limit, plateau and spread; config: the run's settings.
-    Also the footing's effective half-width (problems.localisation.effective_half_width)
-    and the plateau per unit of it."""
+    Also the footing's effective half-width (problems.localisation.effective_half_width;
+    B/2 for every row here: their footing's edge lies at a cell centre)."""
     m = dict(plateau=plateau, plateau_error=plateau - 1.0, spread=spread,
              half_width_effective=r["half_width_effective"],
-             plateau_effective_width=plateau * r["half_width"] / r["half_width_effective"],
              newton_mean=float(np.mean(r["newton"] or [0])), newton_max=int(max(r["newton"] or [0])))
     cfg = dict(integrator="QuasiStatic", scheme="Newton", shape="auto", fbar="auto", h=r["h"],
                ppc=4, cell_type="quadrilateral", **config)
@@ -157,13 +157,13 @@ def _w5_row(h, comm):
     from ..problems.footing import PRANDTL
     from ..problems.localisation import W5_HALF_WIDTH, W5_SOIL, collapse_pressure, strip_footing
     from .localisation import FOOTING
-    r = strip_footing(h, softening=False, settlement=W5_PUSH * 2.0 * W5_HALF_WIDTH,
+    r = strip_footing(h, softening=False, settlement=W5_WINDOW[1] * 2.0 * W5_HALF_WIDTH,
                       steps=W5_STEPS, comm=comm, **FOOTING)
     q = r["pressure"] / (PRANDTL * W5_SOIL["c_u"])
     s = r["settlement"]
     if r["completed"]:
-        collapse = collapse_pressure(s, q)
-        spread = float(np.ptp(q[s >= 0.75 * s[-1] - 1e-12]))
+        collapse = collapse_pressure(s, q, W5_HALF_WIDTH, W5_WINDOW)
+        spread = float(np.ptp(q[s >= W5_WINDOW[0] * 2.0 * W5_HALF_WIDTH - 1e-12]))
     else:
         collapse = spread = float("nan")
     m = _quasi_static_record(f"w5-h{h:.3g}", r, q, collapse, spread, dt=1.0 / W5_STEPS,

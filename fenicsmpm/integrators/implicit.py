@@ -245,7 +245,7 @@ class _Newton:
             # diverging iterate then dominate |f|, so |R|/|f| alone would read about 1)
             if it == self.max_iter or rnorm > diverged:
                 why = (f"in {self.max_iter} iterations" if it == self.max_iter else
-                       f"(diverged at iteration {it}: |R| = {self.DIVERGED * rnorm / diverged:.3g}"
+                       f"(diverged at iteration {it}: |R| = {rnorm / max(r0, 1e-300):.3g}"
                        f" x its initial value)")
                 raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not converge "
                                    f"{why} (|R|/|f| = {rnorm / scale:.3e}; closest "

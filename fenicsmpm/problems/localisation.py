@@ -21,8 +21,9 @@ from ..materials import VonMises
 from ..particles import Particles
 from ..simulation import Simulation
 
-__all__ = ["W5_SOIL", "W5_HALF_WIDTH", "centred_cell_size", "soil", "shear_layer", "shear_layer_simulation", "strip_footing", "prandtl_band_length",
-           "collapse_pressure"]
+__all__ = ["W5_SOIL", "W5_HALF_WIDTH", "soil", "shear_layer", "shear_layer_simulation",
+           "strip_footing", "prandtl_band_length", "collapse_pressure", "centred_cell_size",
+           "under_cells", "pushed_columns", "effective_half_width"]
 
 W5_SOIL = dict(E=2.0e6, nu=0.41, density=1000.0, c_u=10.0e3, c_res=3.0e3, H=-140.0e3)
 W5_HALF_WIDTH = 0.25          # the W5 footing's half-width B/2 [m]
@@ -182,8 +183,8 @@ def effective_half_width(h, half_width, footing="particles"):
     footing="nodes": to the last surface node moved, k h with k = floor(half_width / h) (the
     velocity falls to zero across the cell beyond it, as in a finite element footing).
     Measured the same way (30 mm in 60 steps): 1.129 / 1.130 at 2 / 2.5 cells and 1.017 /
-    1.012 at 5 / 5.5 cells per unit of k h, first converging with h; per unit of (k + 1/2) h
-    they read 0.90-0.92."""
+    1.012 at 5 / 5.5 cells per unit of k h, converging with h; per unit of (k + 1/2) h they
+    read 0.90-0.92."""
     if footing == "particles":
         return (pushed_columns(h, half_width) + 0.5) * h
     return math.floor(half_width / h + 1e-6) * h
