@@ -30,7 +30,21 @@ def test_line_search_rescues_the_footing():
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
 
 
-@pytest.mark.parametrize("bad", [-1, 31, 2.5, True])
+def test_auto_line_search_is_the_default_and_rescues_the_footing():
+    """line_search="auto" (the default): the full step where it converges, the backtracking
+    retry where it fails; the footing then runs to the end with the same plateau."""
+    assert fm.QuasiStatic().line_search == "auto" and fm.Newmark().line_search == "auto"
+    auto = _footing("auto")
+    assert auto["completed"], auto["stopped"]
+    q = auto["pressure"] / ((2.0 + np.pi) * 1e4)
+    assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
+    full = _footing(0)
+    n = len(full["pressure"])           # the steps the full Newton step converged on
+    # the same steps (to the parallel solver's round-off: two MPI runs differ in the last bits)
+    assert n >= 20 and np.allclose(auto["pressure"][:n], full["pressure"], rtol=1e-9, atol=0), (n, q)
+
+
+@pytest.mark.parametrize("bad", [-1, 31, 2.5, True, "yes"])
 def test_line_search_is_checked(bad):
     with pytest.raises(ValueError, match="'line_search'"):
         fm.QuasiStatic(line_search=bad)

@@ -19,11 +19,15 @@ projection of the acceleration loses about 1 % of the energy per 5 periods of th
 5x the critical step; FLIP about 0.1 %). Quasi-static drops the inertia terms and ramps gravity over `load_steps` steps.
 Inactive (massless) nodes and Dirichlet dofs are constrained (unit diagonal, zero residual).
 Newton options (all implicit integrators): rtol, utol, max_iter, and line_search = k >= 0: a
-correction that raises |R| is halved up to k times (backtracking; default 0, the full Newton
-step). Measured (`tests/test_line_search.py`): the Prandtl footing of a smooth rigid strip on
-von Mises soil (h = 0.1 m, 1 mm steps, no step cuts) diverges at step 27 with the full step and
-runs to the end with line_search=6; in the softening shear layer of test_regularisation it
-raises the worst step's Newton iterations from 5 to 9, hence not the default.
+correction that raises |R| is halved up to k times (backtracking; 0: the full Newton step), or
+"auto" (the default): the full Newton step, and if Newton fails on a step (diverges, reaches
+max_iter or a non-finite residual) the same step once more from du = 0 with
+line_search = AUTO_LINE_SEARCH (6) before the step is given up (a dt cut, max_dt_cuts). Steps that
+converge with the full step are therefore unchanged. Measured (`tests/test_line_search.py`): the
+Prandtl footing of a smooth rigid strip on von Mises soil (h = 0.1 m, 1 mm steps, no step cuts)
+diverges at step 27 with the full step and runs to the end with line_search=6 and with "auto";
+in the softening shear layer of test_regularisation line_search=6 on every step raises the
+worst step's Newton iterations from 5 to 9, "auto" leaves them at 5.
 Newton stops early, as not converged (a step cut then retries it), once |R| exceeds
 _Newton.DIVERGED = 1e3 times its value at the start of the step; the error names the
 closest |R|/|f| reached. (The W5 footing at 4.5 cells, 2026-12-04: Newton reached 4.8e-5,
@@ -41,6 +45,12 @@ from ..materials import first_piola, first_piola_tangent
 from .linear_system import DEFAULT_PREFIX, LinearSystem, OutsidePattern, stencil_rings
 
 MAX_RINGS = 4           # the widest implicit pattern _Newton._plan grows to (cell rings)
+AUTO_LINE_SEARCH = 6    # line_search="auto": the backtracking depth of the retry of a failed step
+log = logging.getLogger("fenicsmpm.newton")
+
+
+class _NotConverged(RuntimeError):
+    """Newton failed on this step (before any particle state changed)."""
 
 
 class _Newton:
@@ -50,7 +60,7 @@ class _Newton:
     reports_reaction = True             # sim.nodal["reaction"] after each step
 
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,
-                 prefix=DEFAULT_PREFIX, line_search=0, ghost=0.0, ghost_fill=0.9):
+                 prefix=DEFAULT_PREFIX, line_search="auto", ghost=0.0, ghost_fill=0.9):
         for name, val in (("rtol", rtol), ("utol", utol)):
             if isinstance(val, bool) or not (isinstance(val, (int, float)) and val > 0):
                 raise ValueError(f"{type(self).__name__}: '{name}' must be > 0, got {val!r}")
@@ -61,9 +71,10 @@ class _Newton:
         if petsc_options is not None and not isinstance(petsc_options, dict):
             raise TypeError(f"{type(self).__name__}: 'petsc_options' must be a dict of PETSc "
                             f"options or None, got {type(petsc_options).__name__}")
-        if isinstance(line_search, bool) or not (isinstance(line_search, int) and 0 <= line_search <= 30):
-            raise ValueError(f"{type(self).__name__}: 'line_search' must be an integer in [0, 30], "
-                             f"got {line_search!r}")
+        if line_search != "auto" and (isinstance(line_search, bool) or not (
+                isinstance(line_search, int) and 0 <= line_search <= 30)):
+            raise ValueError(f"{type(self).__name__}: 'line_search' must be \"auto\" or an integer "
+                             f"in [0, 30], got {line_search!r}")
         self.rtol, self.utol, self.max_iter, self.flip = rtol, utol, max_iter, float(flip)
         self.line_search = line_search
         for name, val in (("ghost", ghost), ("ghost_fill", ghost_fill)):
@@ -73,8 +84,9 @@ class _Newton:
         self._ghost = None
         self.petsc_options, self.prefix = petsc_options, prefix
         self.system = None
-        self.iterations = []     # Newton iterations per step
+        self.iterations = []     # Newton iterations per step (a retried step: both attempts)
         self.ksp_iterations = 0
+        self.retries = 0         # steps that line_search="auto" retried with backtracking
 
     def setup(self, sim):
         """Build the PETSc linear system on the grid (integrator protocol: called once)."""
@@ -226,74 +238,99 @@ class _Newton:
                                          f"residual in Newton iteration {it}")
             return R, rnorm, fint, reaction, sig
 
-        it = 0
-        t1 = time.perf_counter()
-        R, rnorm, fint, reaction, sig = newton_residual(du)
-        r0 = rnorm
-        diverged = self.DIVERGED * max(r0, 1e-300)
-        T["solve"] += time.perf_counter() - t1
-        dnorm = np.inf
-        best = (np.inf, 0)                      # the smallest |R|/|f| so far and its iteration
-        for it in range(self.max_iter + 1):
-            scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), r0, force_scale,
-                        self._norm(sim, reaction) if moving else 0.0, 1e-300)
-            if rnorm <= self.rtol * scale or (
-                    dnorm <= self.utol * self._norm(sim, du) and rnorm <= np.sqrt(self.rtol) * scale):
-                break
-            best = min(best, (rnorm / scale, it))
-            # diverged: |R| DIVERGED times its initial value (the internal forces of the
-            # diverging iterate then dominate |f|, so |R|/|f| alone would read about 1)
-            if it == self.max_iter or rnorm > diverged:
-                why = (f"in {self.max_iter} iterations" if it == self.max_iter else
-                       f"(diverged at iteration {it}: |R| = {rnorm / max(r0, 1e-300):.3g}"
-                       f" x its initial value)")
-                raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not converge "
-                                   f"{why} (|R|/|f| = {rnorm / scale:.3e}; closest "
-                                   f"{best[0]:.3e} at iteration {best[1]})")
-            t2 = time.perf_counter()
-            for mat, gidx in sim.material_groups():
-                mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
-            first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
-            extra = None
-            if sim.layers or motion is not None:
-                def extra(data):
-                    if sim.layers:
-                        kl.layer_tangent(sim.grid.D, sim.layer_particles(), sim.nodes, sim.N,
-                                         p.F, p.layer_an0, p.layer_coef, c_v, plan,
-                                         sys.nodeptr, constrained, data)
-                    if motion is not None:
-                        pm.penalty_tangent(motion[0], sim.nodes, sim.N, motion[2], motion[3],
-                                           plan, sys.nodeptr, constrained, data)
-            self.assemble_tangent(sim, A4, plan, np.repeat(m, d) * m_coef, constrained, extra)
-            robin = sim.robin
-            if robin is not None:
-                own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)
-                B = robin.tangent(sim.robin_u + du, velocity(du), c_v, own)
-                if B is not None:
-                    sys.add(B)
-            if ghost is not None:
-                sys.add(ghost.Gz)
-            t3 = time.perf_counter()
-            try:
-                delta = sys.solve(R)
-            except RuntimeError as err:               # KSP failure: say when and where
-                raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}, Newton iteration "
-                                   f"{it}: {err}") from err
-            t4 = time.perf_counter()
-            self.ksp_iterations += sys.iterations
-            T["assembly"] += t3 - t2
-            T["ksp"] += t4 - t3
-            # line_search > 0: halve the correction (up to line_search times) while it raises
-            # |R| (class docstring); 0: the full Newton step
-            alpha, prev = 1.0, rnorm
-            for k in range(self.line_search + 1):
-                R, rnorm, fint, reaction, sig = newton_residual(du + alpha * delta)
-                if rnorm <= prev or k == self.line_search:
+        def newton(du, depth):
+            """Newton from du (changed in place), halving a correction that raises |R| up to
+            `depth` times: (du, iterations, |R|, |f|, reaction); _NotConverged if it diverges
+            or reaches max_iter."""
+            it = 0
+            t1 = time.perf_counter()
+            R, rnorm, fint, reaction, sig = newton_residual(du)
+            r0 = rnorm
+            diverged = self.DIVERGED * max(r0, 1e-300)
+            T["solve"] += time.perf_counter() - t1
+            dnorm = np.inf
+            best = (np.inf, 0)                      # the smallest |R|/|f| so far and its iteration
+            for it in range(self.max_iter + 1):
+                scale = max(fext_norm, self._norm(sim, np.where(cmask, 0.0, fint)), r0, force_scale,
+                            self._norm(sim, reaction) if moving else 0.0, 1e-300)
+                if rnorm <= self.rtol * scale or (
+                        dnorm <= self.utol * self._norm(sim, du) and rnorm <= np.sqrt(self.rtol) * scale):
                     break
-                alpha *= 0.5
-            du += alpha * delta
-            dnorm = alpha * self._norm(sim, delta)
-            T["solve"] += time.perf_counter() - t2
+                best = min(best, (rnorm / scale, it))
+                # diverged: |R| DIVERGED times its initial value (the internal forces of the
+                # diverging iterate then dominate |f|, so |R|/|f| alone would read about 1)
+                if it == self.max_iter or rnorm > diverged:
+                    why = (f"in {self.max_iter} iterations" if it == self.max_iter else
+                           f"(diverged at iteration {it}: |R| = {rnorm / max(r0, 1e-300):.3g}"
+                           f" x its initial value)")
+                    err = _NotConverged(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not "
+                                        f"converge {why} (|R|/|f| = {rnorm / scale:.3e}; closest "
+                                        f"{best[0]:.3e} at iteration {best[1]})")
+                    err.iterations = it
+                    raise err
+                t2 = time.perf_counter()
+                for mat, gidx in sim.material_groups():
+                    mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
+                first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
+                extra = None
+                if sim.layers or motion is not None:
+                    def extra(data):
+                        if sim.layers:
+                            kl.layer_tangent(sim.grid.D, sim.layer_particles(), sim.nodes, sim.N,
+                                             p.F, p.layer_an0, p.layer_coef, c_v, plan,
+                                             sys.nodeptr, constrained, data)
+                        if motion is not None:
+                            pm.penalty_tangent(motion[0], sim.nodes, sim.N, motion[2], motion[3],
+                                               plan, sys.nodeptr, constrained, data)
+                self.assemble_tangent(sim, A4, plan, np.repeat(m, d) * m_coef, constrained, extra)
+                robin = sim.robin
+                if robin is not None:
+                    own = np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32)
+                    B = robin.tangent(sim.robin_u + du, velocity(du), c_v, own)
+                    if B is not None:
+                        sys.add(B)
+                if ghost is not None:
+                    sys.add(ghost.Gz)
+                t3 = time.perf_counter()
+                try:
+                    delta = sys.solve(R)
+                except RuntimeError as err:               # KSP failure: say when and where
+                    raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}, Newton iteration "
+                                       f"{it}: {err}") from err
+                t4 = time.perf_counter()
+                self.ksp_iterations += sys.iterations
+                T["assembly"] += t3 - t2
+                T["ksp"] += t4 - t3
+                # depth > 0: halve the correction (up to depth times) while it raises |R|
+                # (module docstring); 0: the full Newton step
+                alpha, prev = 1.0, rnorm
+                for k in range(depth + 1):
+                    R, rnorm, fint, reaction, sig = newton_residual(du + alpha * delta)
+                    if rnorm <= prev or k == depth:
+                        break
+                    alpha *= 0.5
+                du += alpha * delta
+                dnorm = alpha * self._norm(sim, delta)
+                T["solve"] += time.perf_counter() - t2
+            return du, it, rnorm, scale, reaction
+
+        depth = 0 if self.line_search == "auto" else self.line_search
+        try:
+            du, it, rnorm, scale, reaction = newton(du.copy(), depth)
+        except (_NotConverged, FloatingPointError) as err:
+            if self.line_search != "auto":
+                raise
+            # line_search="auto": the same step again with backtracking (module docstring)
+            self.retries += 1
+            first = getattr(err, "iterations", 0)
+            if sim.comm.rank == 0:
+                log.info("%s; retrying the step with line_search=%d", err, AUTO_LINE_SEARCH)
+            try:
+                du, it, rnorm, scale, reaction = newton(du, AUTO_LINE_SEARCH)
+            except _NotConverged as again:
+                raise _NotConverged(f"{again} (full step: {err}; then line_search="
+                                    f"{AUTO_LINE_SEARCH})") from None
+            it += first
         self.iterations.append(it)
         sim.nodal["reaction"] = reaction        # force the fixed dofs exert (summed over ranks)
         if motion is not None:                  # each prescribed particle motion's reaction

@@ -192,7 +192,7 @@ def effective_half_width(h, half_width, footing="particles"):
 
 def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0, depth=4.0,
                   half_width=W5_HALF_WIDTH, m=2.0, cuts=3, softening=True, fbar="auto", shape="auto",
-                  material=None, line_search=0, footing="nodes", ghost=0.0, rtol=1e-8,
+                  material=None, line_search="auto", footing="nodes", ghost=0.0, rtol=1e-8,
                   rough=False):
     """The W5 strip footing (seed 000 ch. 5: half model, B/2 = 0.25 m next to the symmetry
     axis x = 0, layer 6 m wide and 4 m deep, 2 x 2 particles per cell, quadrilaterals of
