@@ -40,8 +40,9 @@ def test_auto_line_search_is_the_default_and_rescues_the_footing():
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
     full = _footing(0)
     n = len(full["pressure"])           # the steps the full Newton step converged on
-    # the same steps (to the parallel solver's round-off: two MPI runs differ in the last bits)
-    assert n >= 20 and np.allclose(auto["pressure"][:n], full["pressure"], rtol=1e-9, atol=0), (n, q)
+    # the same steps, to Newton's tolerance (two MPI runs differ by up to 1e-9: the parallel
+    # direct solver does not add in a fixed order)
+    assert n >= 20 and np.allclose(auto["pressure"][:n], full["pressure"], rtol=1e-6, atol=0), (n, q)
 
 
 @pytest.mark.parametrize("bad", [-1, 31, 2.5, True, "yes"])
