@@ -30,22 +30,32 @@ from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 
 @njit(cache=True)
-def _integral(a, b, L):
-    """int_a^b max(0, 1 - |s|/L) ds for a <= b: the parts below and above s = 0, each from
-    the antiderivative that vanishes at its end of the support ((L + s)^2 / 2L below, and
-    -(L - s)^2 / 2L above), so a box overlapping the support by delta << L gets delta^2 / 2L
-    and not a difference of two numbers near L (which rounds to 0 while the gradient does
-    not, and the weight gradients stop summing to zero)."""
+def _integral(a, b, L, inv_2L):
+    """int_a^b max(0, 1 - |s|/L) ds for a <= b (inv_2L = 1 / 2L): the parts below and above
+    s = 0, each from the antiderivative that vanishes at its end of the support ((L + s)^2 / 2L
+    below, and -(L - s)^2 / 2L above), so a box overlapping the support by delta << L gets
+    delta^2 / 2L and not a difference of two numbers near L (which rounds to 0 while the
+    gradient does not, and the weight gradients stop summing to zero)."""
     lo, hi = max(a, -L), min(b, 0.0)
-    below = ((L + hi) * (L + hi) - (L + lo) * (L + lo)) / (2.0 * L) if hi > lo else 0.0
+    below = ((L + hi) * (L + hi) - (L + lo) * (L + lo)) * inv_2L if hi > lo else 0.0
     lo, hi = max(a, 0.0), min(b, L)
-    above = ((L - lo) * (L - lo) - (L - hi) * (L - hi)) / (2.0 * L) if hi > lo else 0.0
+    above = ((L - lo) * (L - lo) - (L - hi) * (L - hi)) * inv_2L if hi > lo else 0.0
     return below + above
 
 
 @njit(cache=True)
-def _hat(s, L):
-    return max(0.0, 1.0 - abs(s) / L)
+def _hat(s, L, inv_L):
+    return max(0.0, 1.0 - abs(s) * inv_L)
+
+
+@njit(cache=True)
+def _weight(a, b, inv_w, xi_node, L, inv_L, inv_2L):
+    """S and dS of the node at xi_node for the clipped box [a, b] (inv_w = 1 / (b - a))."""
+    if b - xi_node <= -L * (1.0 - 1e-12) or a - xi_node >= L * (1.0 - 1e-12):
+        return 0.0, 0.0
+    S = _integral(a - xi_node, b - xi_node, L, inv_2L) * inv_w
+    dS = (_hat(b - xi_node, L, inv_L) - _hat(a - xi_node, L, inv_L)) * inv_w
+    return S, dS
 
 
 @njit(cache=True)
@@ -53,15 +63,11 @@ def weight_1d(xp, lp, xi_node, L, lo, hi):
     """1D GIMP weight and gradient of the node at xi_node for the box [xp - lp, xp + lp]
     clipped to [lo, hi] (see the module docstring). A box that overlaps the node's support
     by less than 1e-12 L gets exactly 0 (its weight, below 1e-24, is round-off of a box that
-    ends on the support's edge)."""
+    ends on the support's edge). The divisions are by reciprocals computed once (a particle's
+    kernel computes them once per axis)."""
     a = max(xp - lp, lo)
     b = min(xp + lp, hi)
-    if b - xi_node <= -L * (1.0 - 1e-12) or a - xi_node >= L * (1.0 - 1e-12):
-        return 0.0, 0.0
-    w = b - a
-    S = _integral(a - xi_node, b - xi_node, L) / w
-    dS = (_hat(b - xi_node, L) - _hat(a - xi_node, L)) / w
-    return S, dS
+    return _weight(a, b, 1.0 / (b - a), xi_node, L, 1.0 / L, 0.5 / L)
 
 
 @njit(cache=True)
@@ -138,18 +144,23 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
     Sk = np.empty((d, ns))
     dSk = np.empty((d, ns))
     off = np.empty((d, ns), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
+    inv_L = 1.0 / spacing
+    inv_2L = 0.5 / spacing
     bad = -1
     for p in range(p0, p1):
         stride = 1
         for k in range(d):
             lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
             L = spacing[k]
-            j0 = int(np.floor((max(x[p, k] - lp, lo[k]) - origin[k]) / L))
+            a = max(x[p, k] - lp, lo[k])
+            b = min(x[p, k] + lp, hi[k])
+            inv_w = 1.0 / (b - a)
+            j0 = int(np.floor((a - origin[k]) / L))
             for q in range(ns):
                 j = j0 + q
                 jl = j - ilo[k]
                 off[k, q] = jl * stride if 0 <= jl < nlat[k] else -1
-                S, dS = weight_1d(x[p, k], lp, origin[k] + j * L, L, lo[k], hi[k])
+                S, dS = _weight(a, b, inv_w, origin[k] + j * L, L, inv_L[k], inv_2L[k])
                 Sk[k, q] = S
                 dSk[k, q] = dS
             stride *= nlat[k]
