@@ -20,6 +20,10 @@ def _random_particles(rng, n, n_nodes, nv, d):
     V = rng.uniform(0.5, 1.5, n)
     sigma = rng.standard_normal((n, 3, 3))
     sigma = 0.5 * (sigma + sigma.transpose(0, 2, 1))
+    if d == 2:          # plane strain: F_zz = 1, no out-of-plane shear (sigma_zz stays)
+        F[:, 2, :2] = F[:, :2, 2] = 0.0
+        F[:, 2, 2] = 1.0
+        sigma[:, 2, :2] = sigma[:, :2, 2] = 0.0
     return nodes, dN, w, F, V, sigma, rng.standard_normal(n)
 
 
