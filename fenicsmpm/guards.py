@@ -29,12 +29,19 @@ def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, m
         if s > 0.0 and V[p] > stretch[material_id[p]] * V0[p]:
             stretch[material_id[p]] = V[p] / V0[p]
         code = 5 if p < inverted.shape[0] and inverted[p] == 1 else 0
-        for k in range(d if code == 0 else 0):
+        # 0 * value is 0 for every finite value and NaN otherwise: one test for the common case
+        z = 0.0
+        for k in range(d):
+            z += 0.0 * x[p, k] + 0.0 * v[p, k]
+        for i in range(3):
+            for j in range(3):
+                z += 0.0 * stress[p, i, j] + 0.0 * F[p, i, j]
+        for k in range(d if code == 0 and z != 0.0 else 0):
             if not np.isfinite(x[p, k]):
                 code = 1
             elif not np.isfinite(v[p, k]):
                 code = 2
-        if code == 0:
+        if code == 0 and z != 0.0:
             for i in range(3):
                 for j in range(3):
                     if not np.isfinite(stress[p, i, j]):
