@@ -5,7 +5,8 @@ passes it replaces (issue 16).
 
 Kernels only (no mesh): n particles (full 1.0e6, quick 1.0e5) in 2D with `nv` nodes each
 (4: standard MPM on quads; 9: GIMP), random node lists sorted by particle (the locality of
-particles stored in fill order), random weights, gradients, nodal fields and particle state.
+particles stored in fill order), random weights, gradients, nodal fields and plane-strain
+particle states (kernels.fused._elastic_plane).
   elastic:  kernels.fused.elastic_step  against  transfer.incremental_F + the Jaumann
             linear-elastic stress + transfer.commit_step.
 (A fused G2P + MUSL remap P2G was measured here too, at 0.86-1.0x of its two passes, and
@@ -41,6 +42,7 @@ def _data(n, nv, rng):
     dN = rng.standard_normal((n, nv, 2))
     F = np.tile(np.eye(3), (n, 1, 1))
     sigma = rng.standard_normal((n, 3, 3))
+    sigma[:, 2, :2] = sigma[:, :2, 2] = 0.0          # plane strain: no out-of-plane shear
     return dict(nodes=nodes, N=N, dN=dN, w=1e-3 * rng.standard_normal((n_nodes, 2)), F=F,
                 V=rng.uniform(0.5, 1.5, n), sigma=0.5 * (sigma + sigma.transpose(0, 2, 1)),
                 work=np.zeros(n), inverted=np.zeros(n, np.int8))

@@ -191,6 +191,8 @@ class _Newton:
         P = np.empty((n, 3, 3))
         dsig = np.empty((n, 3, 3, 3, 3))
         A4 = np.empty((n, 3, 3, 3, 3))
+        # a plane-strain stiffness reads only A4's in-plane entries (first_piola_tangent)
+        plane = d == 2 and not (sim.axisymmetric or sim.fbar)
         idx = np.arange(n, dtype=np.int64)
         fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
         motion = pm.targets(sim, sim.t + dt) if sim.particle_motions else None
@@ -271,7 +273,7 @@ class _Newton:
                 t2 = time.perf_counter()
                 for mat, gidx in sim.material_groups():
                     mat.tangent(gidx, sim._dF, p.F, p.stress, sig, p.state, dsig)
-                first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
+                first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4, plane)
                 extra = None
                 if sim.layers or motion is not None:
                     def extra(data):

@@ -6,6 +6,9 @@ Tensors are 3x3 float64, contiguous, stacked along the first axis.
 """
 import numba
 import numpy as np
+from numba import prange
+
+from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 __all__ = ["first_piola", "first_piola_tangent", "strain_energy_increment",
            "det3", "inv3", "eigh3"]
@@ -135,7 +138,26 @@ def first_piola(idx, dF, sigma, P):
 
 
 @numba.njit(cache=True)
-def first_piola_tangent(idx, dF, sigma, dsig, A):
+def _piola_tangent(idx, dF, sigma, dsig, A, m, lo, hi):
+    Finv = np.empty((3, 3))
+    sFt = np.empty((3, 3))
+    for q in range(lo, hi):
+        p = idx[q]
+        J = inv3(dF[p], Finv)
+        _sigma_FinvT(sigma[p], Finv, sFt)
+        for i in range(m):
+            for a in range(m):
+                for k in range(m):
+                    for L in range(m):
+                        v = Finv[L, k] * sFt[i, a] - sFt[i, L] * Finv[a, k]
+                        s = 0.0
+                        for j in range(3):
+                            s += dsig[p, i, j, k, L] * Finv[a, j]
+                        A[p, i, a, k, L] = J * (v + s)
+
+
+@numba.njit(parallel=PRANGE, cache=True)
+def first_piola_tangent(idx, dF, sigma, dsig, A, plane=False):
     """Tangent of ``first_piola`` w.r.t. the incremental deformation gradient.
 
     A[p,i,J,k,L] = dP_iJ / d dF_kL
@@ -144,22 +166,20 @@ def first_piola_tangent(idx, dF, sigma, dsig, A):
                  - J sigma_ij (dF^-1)_Jk (dF^-1)_Lj          (sum over j),
     using dJ = J (dF^-1)_Lk d dF_kL and d(dF^-1) = -dF^-1 d(dF) dF^-1
     (Bonet & Wood 2008, sec. 2.3).  ``dsig`` = d sigma / d dF, shape (n,3,3,3,3).
+    plane=True: only the in-plane entries (i, J, k, L < 2) are written (the others are left
+    as they were), for a 2D stiffness that reads no more (kernels.transfer.assemble_stiffness;
+    not the axisymmetric hoop terms nor F-bar's volumetric part). Threaded over particle
+    chunks (kernels.threads): the same bits on any number of threads.
     """
-    Finv = np.empty((3, 3))
-    sFt = np.empty((3, 3))
-    for q in range(idx.shape[0]):
-        p = idx[q]
-        J = inv3(dF[p], Finv)
-        _sigma_FinvT(sigma[p], Finv, sFt)
-        for i in range(3):
-            for a in range(3):
-                for k in range(3):
-                    for L in range(3):
-                        v = Finv[L, k] * sFt[i, a] - sFt[i, L] * Finv[a, k]
-                        s = 0.0
-                        for j in range(3):
-                            s += dsig[p, i, j, k, L] * Finv[a, j]
-                        A[p, i, a, k, L] = J * (v + s)
+    m = 2 if plane else 3
+    n = idx.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        _piola_tangent(idx, dF, sigma, dsig, A, m, 0, n)
+        return
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _piola_tangent(idx, dF, sigma, dsig, A, m, lo, hi)
 
 
 @numba.njit(cache=True)
