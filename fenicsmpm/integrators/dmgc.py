@@ -151,7 +151,8 @@ class _DoubleMapping:
         self._elem_nodes = np.ascontiguousarray(lat["table"][ij[..., 0] + ij[..., 1] * lat["nlat"][0]],
                                                 dtype=np.int64)
         self._elem_plan = np.empty((len(ij), 4, 4), dtype=np.int64)
-        kt.stiffness_plan(self._elem_nodes, self.system.nodeptr, self.system.adj, 2, self._elem_plan)
+        kt.stiffness_plan(self._elem_nodes, self.system.nodeptr, self.system.adj, 2, self._elem_plan,
+                          self._elem_nodes[:0])
         L = lat["spacing"]
         gp = np.array([-1.0, 1.0]) / np.sqrt(3.0)
         xi = np.array([[gx, gy] for gy in gp for gx in gp])             # (4 Gauss points, 2)

@@ -188,9 +188,10 @@ class _Newton:
         t0 = time.perf_counter()
         plan, sys = self._plan(sim)
         T["assembly"] += time.perf_counter() - t0
-        P = np.empty((n, 3, 3))
-        dsig = np.empty((n, 3, 3, 3, 3))
-        A4 = np.empty((n, 3, 3, 3, 3))
+        # work arrays kept between steps (fresh ones cost their page faults every step)
+        P = sim._per_particle("newton_P", (3, 3))
+        dsig = sim._per_particle("newton_dsig", (3, 3, 3, 3))
+        A4 = sim._per_particle("newton_A4", (3, 3, 3, 3))
         # a plane-strain stiffness reads only A4's in-plane entries (first_piola_tangent)
         plane = d == 2 and not (sim.axisymmetric or sim.fbar)
         idx = np.arange(n, dtype=np.int64)

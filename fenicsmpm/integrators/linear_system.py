@@ -115,9 +115,16 @@ class LinearSystem:
     def plan(self, nodes):
         """Scatter plan of the current particle-node connectivity (once per step). With the
         wide pattern (rings > 1) a node pair outside it raises OutsidePattern (a RuntimeError)
-        on every rank (collective), never a dropped or misplaced term."""
-        plan = np.empty(nodes.shape + (nodes.shape[1],), dtype=np.int64)
-        miss = kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan)
+        on every rank (collective), never a dropped or misplaced term. The rows of particles
+        whose nodes have not changed since the last call are kept (kt.stiffness_plan)."""
+        shape = nodes.shape + (nodes.shape[1],)
+        last = getattr(self, "_last_plan", None)
+        if last is not None and last[1].shape == shape:
+            old, plan = last
+        else:
+            old, plan = nodes[:0], np.empty(shape, dtype=np.int64)
+        self._last_plan = None                      # until this plan is complete
+        miss = kt.stiffness_plan(nodes, self.nodeptr, self.adj, self.bs, plan, old)
         comm = self.grid.comm
         if comm.size > 1:                           # collective: every rank raises together
             from mpi4py import MPI
@@ -135,6 +142,7 @@ class LinearSystem:
                 f"(its domain grew beyond what the pattern covers, e.g. a cpGIMP box stretched "
                 f"past |F_kk| l0 = L/2 or a CPDI domain larger than a cell). Refine the grid, "
                 f"use fewer particles per cell or shape='ugimp'/'cpdi1'; the term is not dropped")
+        self._last_plan = (nodes.copy(), plan)
         return plan
 
     def assemble(self, nodes, dN, V, A4, plan, diag_add, constrained, extra=None, fbar=None):

@@ -559,9 +559,17 @@ def _find(adj, lo, hi, j):
 
 
 @njit(cache=True)
-def _plan(nodes, nodeptr, adj, bs, lo, hi, plan_out):
+def _plan(nodes, nodeptr, adj, bs, lo, hi, plan_out, old_nodes):
     nv = nodes.shape[1]
     for p in range(lo, hi):
+        if old_nodes.shape[0] > p:          # a row is a function of its nodes: keep it
+            same = True
+            for a in range(nv):
+                if nodes[p, a] != old_nodes[p, a]:
+                    same = False
+                    break
+            if same:
+                continue
         for a in range(nv):
             i = nodes[p, a]
             for b in range(nv):
@@ -574,17 +582,20 @@ def _plan(nodes, nodeptr, adj, bs, lo, hi, plan_out):
 
 
 @njit(parallel=PRANGE, cache=True)
-def stiffness_plan(nodes, nodeptr, adj, bs, plan_out):
+def stiffness_plan(nodes, nodeptr, adj, bs, plan_out, old_nodes):
     """plan[p, a, b] = CSR offset of block (nodes[p,a], nodes[p,b]) (row component 0, col 0);
     entry (component r, component c) of that block sits at plan + r*deg(i)*bs + c. Returns -1,
     or the first pair missing from the pattern (flat index p * nv * nv + a * nv + b), whose
-    offset is not written. Threaded over particle chunks (per-particle output)."""
+    offset is not written. Rows p < len(old_nodes) whose nodes equal old_nodes[p] are left
+    as they are (plan_out then holds the plan of old_nodes on the same pattern: the last
+    step's; an empty old_nodes computes every row). Threaded over particle chunks
+    (per-particle output)."""
     n = nodes.shape[0]
     nc = particle_chunks(n)
     miss = np.full(nc, -1, dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        miss[c] = _plan(nodes, nodeptr, adj, bs, lo, hi, plan_out)
+        miss[c] = _plan(nodes, nodeptr, adj, bs, lo, hi, plan_out, old_nodes)
     for c in range(nc):
         if miss[c] >= 0:
             return miss[c]

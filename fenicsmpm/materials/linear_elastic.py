@@ -169,16 +169,29 @@ def jaumann_tangent(i, j, k, l, lam, mu, s):
 
 
 @numba.njit(cache=True)
-def linear_elastic_tangent_kernel(idx, sigma_old, dsig, lam, mu):
-    """dsig[p,i,j,k,l] = lam d_ij d_kl + mu (d_ik d_jl + d_il d_jk)
-    + 1/2 (d_ik s_lj - d_il s_kj) - 1/2 (s_ik d_jl - s_il d_jk),  s = sigma_old."""
-    for q in range(idx.shape[0]):
+def _tangent(idx, sigma_old, dsig, lam, mu, lo, hi):
+    for q in range(lo, hi):
         p = idx[q]
         for i in range(3):
             for j in range(3):
                 for k in range(3):
                     for l in range(3):
                         dsig[p, i, j, k, l] = jaumann_tangent(i, j, k, l, lam, mu, sigma_old[p])
+
+
+@numba.njit(parallel=PRANGE, cache=True)
+def linear_elastic_tangent_kernel(idx, sigma_old, dsig, lam, mu):
+    """dsig[p,i,j,k,l] = lam d_ij d_kl + mu (d_ik d_jl + d_il d_jk)
+    + 1/2 (d_ik s_lj - d_il s_kj) - 1/2 (s_ik d_jl - s_il d_jk),  s = sigma_old (threaded
+    over chunks of idx, kernels.threads)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        _tangent(idx, sigma_old, dsig, lam, mu, 0, n)
+        return
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _tangent(idx, sigma_old, dsig, lam, mu, lo, hi)
 
 
 class LinearElastic(IsotropicElasticParameters):
