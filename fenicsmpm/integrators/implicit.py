@@ -192,8 +192,9 @@ class _Newton:
         P = sim._per_particle("newton_P", (3, 3))
         dsig = sim._per_particle("newton_dsig", (3, 3, 3, 3))
         A4 = sim._per_particle("newton_A4", (3, 3, 3, 3))
-        # a plane-strain stiffness reads only A4's in-plane entries (first_piola_tangent)
-        plane = d == 2 and not (sim.axisymmetric or sim.fbar)
+        # a plane-strain stiffness reads only A4's in-plane entries (first_piola_tangent;
+        # F-bar's too: kernels.fbar.fbar_stiffness averages over n = 2 there)
+        plane = d == 2 and not sim.axisymmetric
         idx = np.arange(n, dtype=np.int64)
         fext_norm = self._norm(sim, np.where(cmask, 0.0, f_ext))
         motion = pm.targets(sim, sim.t + dt) if sim.particle_motions else None

@@ -167,8 +167,8 @@ def first_piola_tangent(idx, dF, sigma, dsig, A, plane=False):
     using dJ = J (dF^-1)_Lk d dF_kL and d(dF^-1) = -dF^-1 d(dF) dF^-1
     (Bonet & Wood 2008, sec. 2.3).  ``dsig`` = d sigma / d dF, shape (n,3,3,3,3).
     plane=True: only the in-plane entries (i, J, k, L < 2) are written (the others are left
-    as they were), for a 2D stiffness that reads no more (kernels.transfer.assemble_stiffness;
-    not the axisymmetric hoop terms nor F-bar's volumetric part). Threaded over particle
+    as they were), for a 2D stiffness that reads no more (kernels.transfer.assemble_stiffness,
+    kernels.fbar.fbar_stiffness; not the axisymmetric hoop terms). Threaded over particle
     chunks (kernels.threads): the same bits on any number of threads.
     """
     m = 2 if plane else 3
