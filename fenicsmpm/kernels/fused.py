@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..materials.linear_elastic import jaumann_update
-from ..materials.piola import det3
+from ..materials.piola import det3, work_increment
 from .threads import PRANGE, chunk, particle_chunks
 from .transfer import commit_particle, inversion_flag, particle_dF
 
@@ -49,13 +49,13 @@ def _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo, h
 @njit(cache=True)
 def _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo, hi):
     """_elastic for plane strain (module docstring): the terms of particle_dF, det3,
-    strain_spin, jaumann_update, work_increment and commit_particle that are not products
-    with an exact zero, in their order."""
+    jaumann_update, work_increment and commit_particle that are not products with an exact
+    zero, in their order (the in-plane blocks, m = 2)."""
     n_bad = 0
-    dF = np.empty((2, 2))
-    e = np.empty((2, 2))
-    om = np.empty((2, 2))
-    s = np.empty((2, 2))
+    dF = np.eye(3)
+    eps = np.empty((3, 3))
+    om = np.empty((3, 3))
+    s = np.empty((3, 3))
     for p in range(lo, hi):
         dF[0, 0], dF[0, 1], dF[1, 0], dF[1, 1] = 1.0, 0.0, 0.0, 1.0
         for a in range(nodes.shape[1]):
@@ -70,35 +70,11 @@ def _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo
             inverted[p] = flag
             n_bad += 1
             continue
-        for i in range(2):
-            for j in range(2):
-                hij = dF[i, j] - (1.0 if i == j else 0.0)
-                hji = dF[j, i] - (1.0 if i == j else 0.0)
-                e[i, j] = 0.5 * (hij + hji)
-                om[i, j] = 0.5 * (hij - hji)
-        tr = e[0, 0] + e[1, 1]
         sp = sigma[p]
-        for i in range(2):
-            for j in range(2):
-                v = sp[i, j] + 2.0 * mu * e[i, j]
-                if i == j:
-                    v += lam * tr
-                for m in range(2):
-                    v += om[i, m] * sp[m, j] - sp[i, m] * om[m, j]
-                s[i, j] = v
+        tr = jaumann_update(dF, sp, lam, mu, s, eps, om, 2)
         s22 = sp[2, 2] + lam * tr
-        # work_increment: its strain is 0.5 (dF + dF^T) - I, rounded as there
-        so = 0.0
-        sn = 0.0
-        for i in range(2):
-            for j in range(2):
-                ew = 0.5 * (dF[i, j] + dF[j, i])
-                if i == j:
-                    ew -= 1.0
-                so += sp[i, j] * ew
-                sn += s[i, j] * ew
         V_new = J * V[p]
-        work[p] += 0.5 * (so * V[p] + sn * V_new)
+        work[p] += work_increment(dF, sp, s, V[p], V_new, 2)
         V[p] = V_new
         Fp = F[p]
         f00 = dF[0, 0] * Fp[0, 0] + dF[0, 1] * Fp[1, 0]

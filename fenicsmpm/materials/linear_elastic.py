@@ -96,11 +96,11 @@ class IsotropicElasticParameters:
 
 
 @numba.njit(cache=True)
-def strain_spin(dF, eps, om):
+def strain_spin(dF, eps, om, m=3):
     """The step's strain and spin increments of one particle (3x3 arrays):
-    eps = sym(dF - I), om = skew(dF - I)."""
-    for i in range(3):
-        for j in range(3):
+    eps = sym(dF - I), om = skew(dF - I); m = 2: the in-plane block only."""
+    for i in range(m):
+        for j in range(m):
             hij = dF[i, j] - (1.0 if i == j else 0.0)
             hji = dF[j, i] - (1.0 if i == j else 0.0)
             eps[i, j] = 0.5 * (hij + hji)
@@ -108,19 +108,25 @@ def strain_spin(dF, eps, om):
 
 
 @numba.njit(cache=True)
-def jaumann_update(dF, s_old, lam, mu, s_new, eps, om):
+def jaumann_update(dF, s_old, lam, mu, s_new, eps, om, m=3):
     """One particle (3x3 arrays): s_new = s_old + lam tr(eps) I + 2 mu eps + om s_old - s_old om,
-    eps = sym(dF - I), om = skew(dF - I) (strain_spin; eps, om: 3x3 scratch)."""
-    strain_spin(dF, eps, om)
-    tr = eps[0, 0] + eps[1, 1] + eps[2, 2]
-    for i in range(3):
-        for j in range(3):
+    eps = sym(dF - I), om = skew(dF - I) (strain_spin; eps, om: 3x3 scratch). m = 2: the
+    in-plane block of a plane-strain state (out-of-plane rows of dF those of I, no
+    out-of-plane shear), where the terms left out are products with exact zeros; sigma_zz is
+    then s_old_zz + lam tr(eps) (kernels.fused). Returns tr(eps)."""
+    strain_spin(dF, eps, om, m)
+    tr = 0.0
+    for i in range(m):
+        tr += eps[i, i]
+    for i in range(m):
+        for j in range(m):
             s = s_old[i, j] + 2.0 * mu * eps[i, j]
             if i == j:
                 s += lam * tr
-            for m in range(3):
-                s += om[i, m] * s_old[m, j] - s_old[i, m] * om[m, j]
+            for k in range(m):
+                s += om[i, k] * s_old[k, j] - s_old[i, k] * om[k, j]
             s_new[i, j] = s
+    return tr
 
 
 @numba.njit(cache=True)

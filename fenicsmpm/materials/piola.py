@@ -183,14 +183,15 @@ def first_piola_tangent(idx, dF, sigma, dsig, A, plane=False):
 
 
 @numba.njit(cache=True)
-def work_increment(dF, sigma_old, sigma_new, volume_old, volume_new):
+def work_increment(dF, sigma_old, sigma_new, volume_old, volume_new, m=3):
     """1/2 (sigma_old : eps V_old + sigma_new : eps V_new), eps = sym(dF - I), for one
     particle (3x3 arrays): the trapezoidal stress work of a step (Belytschko, Liu & Moran,
-    *Nonlinear FE for Continua and Structures*, sec. 6.2.6 energy balance)."""
+    *Nonlinear FE for Continua and Structures*, sec. 6.2.6 energy balance). m = 2: the
+    in-plane block (plane strain, where the out-of-plane strain is 0)."""
     so = 0.0
     sn = 0.0
-    for i in range(3):
-        for j in range(3):
+    for i in range(m):
+        for j in range(m):
             e = 0.5 * (dF[i, j] + dF[j, i])
             if i == j:
                 e -= 1.0
