@@ -360,7 +360,9 @@ class _Newton:
 
 class Newmark(_Newton):
     """Implicit Newmark (default beta = 1/4, gamma = 1/2: trapezoidal, unconditionally stable).
-    alpha_m = alpha_f = 0 here; ImplicitGeneralizedAlpha sets them (module docstring)."""
+    alpha_m = alpha_f = 0 here; ImplicitGeneralizedAlpha sets them (module docstring).
+    Newton's options (rtol, utol, max_iter, line_search="auto": a failed step is solved again
+    with backtracking, ghost, petsc_options): the module docstring."""
 
     alpha_m = alpha_f = 0.0
     records_work = True
@@ -452,7 +454,8 @@ class QuasiStatic(_Newton):
     displacement: None, or u(x, t) -> (n, gdim) for displacement control: each step moves the
     fixed dofs (sim.fix) by u(x, t + dt) - u(x, t), x the node coordinates, and starts Newton
     from that increment on the free dofs too (so u should be a plausible field there, e.g. 0);
-    the force the fixed dofs exert is sim.nodal["reaction"] after the step."""
+    the force the fixed dofs exert is sim.nodal["reaction"] after the step. Newton's options
+    (rtol, utol, max_iter, line_search="auto", ghost, petsc_options): as Newmark's."""
 
     def __init__(self, load_steps=1, displacement=None, **kw):
         super().__init__(**kw)
