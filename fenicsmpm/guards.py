@@ -36,13 +36,13 @@ def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, m
         for i in range(3):
             for j in range(3):
                 z += 0.0 * stress[p, i, j] + 0.0 * F[p, i, j]
-        for k in range(d if code == 0 and z != 0.0 else 0):
-            if not np.isfinite(x[p, k]):
-                code = 1
-            elif not np.isfinite(v[p, k]):
-                code = 2
-        if code == 0 and z != 0.0:
-            for i in range(3):
+        if code == 0 and z != 0.0:                  # which field is not finite
+            for k in range(d):
+                if not np.isfinite(x[p, k]):
+                    code = 1
+                elif not np.isfinite(v[p, k]):
+                    code = 2
+            for i in range(3 if code == 0 else 0):
                 for j in range(3):
                     if not np.isfinite(stress[p, i, j]):
                         code = 3

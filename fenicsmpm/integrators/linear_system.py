@@ -61,6 +61,7 @@ class LinearSystem:
         if not (isinstance(rings, (int, np.integer)) and rings >= 1):
             raise ValueError(f"LinearSystem: 'rings' must be a positive integer, got {rings!r}")
         self.rings, self.shape = int(rings), shape
+        self._last_plan = None      # (nodes, plan) of the last plan() call (rows reused)
         if self.rings == 1:
             cn = grid.cell_nodes.astype(np.int64)
             nv = cn.shape[1]
@@ -118,7 +119,7 @@ class LinearSystem:
         on every rank (collective), never a dropped or misplaced term. The rows of particles
         whose nodes have not changed since the last call are kept (kt.stiffness_plan)."""
         shape = nodes.shape + (nodes.shape[1],)
-        last = getattr(self, "_last_plan", None)
+        last = self._last_plan
         if last is not None and last[1].shape == shape:
             old, plan = last
         else:
