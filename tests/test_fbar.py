@@ -95,20 +95,14 @@ def test_fbar_refuses_what_it_does_not_support():
         fm.Simulation(grid, p, fm.Explicit(), dt=1e-3, fbar="yes")
 
 
-@pytest.mark.parametrize("plastic,shape", [(False, "mpm"), (True, "mpm"), (False, "cpgimp"),
-                                           (True, "cpgimp")])
-def test_implicit_fbar_tangent_matches_finite_differences(plastic, shape):
-    """The implicit F-bar tangent (kernels.fbar.fbar_stiffness, assembled by the Newton
-    integrators) is the derivative of the F-bar internal force: K d against a central
-    difference of f_int along a random direction d, at a random increment du from a
-    distorted, stressed state (nu = 0.45; von Mises yielding with its consistent tangent),
-    standard and cpGIMP shapes (the latter couples the nodes of all particles of a cell).
-    Measured relative error 5.4e-11 / 1.9e-10 (standard, elastic / plastic), 4.2e-11 /
-    2.5e-10 (cpGIMP); K unsymmetric (3-5 %). Each rank checks its own serial mesh."""
+def _tangent_scene(cells, plastic, shape):
+    """The F-bar tangent test's scene on a serial cells x cells mesh (nu = 0.45, a distorted,
+    stressed state, F-bar, QuasiStatic): (sim, internal(du) -> (-f_int, stress), du,
+    assemble() -> K as a dense array (None: assemble only), rng)."""
     from dolfinx import mesh
     from mpi4py import MPI
     from fenicsmpm.materials import first_piola, first_piola_tangent
-    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_SELF, [[0, 0], [1, 1]], [3, 3],
+    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_SELF, [[0, 0], [1, 1]], [cells, cells],
                                          mesh.CellType.quadrilateral))
     mat = (fm.VonMises(E=1e6, nu=0.45, density=1e3, c_u=2e3) if plastic
            else fm.LinearElastic(E=1e6, nu=0.45, density=1e3))
@@ -134,14 +128,31 @@ def test_implicit_fbar_tangent_matches_finite_differences(plastic, shape):
     _, sig = internal(du)
     if plastic:
         assert np.any(sim._state_new[:, 0] > p.state[:, 0])      # some particles yield
-    dsig, A4 = np.empty((n, 3, 3, 3, 3)), np.empty((n, 3, 3, 3, 3))
-    for m, g in sim.material_groups():
-        m.tangent(g, sim._dF, p.F, p.stress, sig, p.state, dsig)
-    first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
-    nd = grid.n_nodes * 2
-    integ.assemble_tangent(sim, A4, integ.system.plan(sim.nodes), np.zeros(nd),
-                           np.zeros(nd, dtype=bool))
-    K = integ.system.A.convert("dense").getDenseArray()
+
+    def assemble(dense=True):
+        dsig, A4 = np.empty((n, 3, 3, 3, 3)), np.empty((n, 3, 3, 3, 3))
+        for m, g in sim.material_groups():
+            m.tangent(g, sim._dF, p.F, p.stress, sig, p.state, dsig)
+        first_piola_tangent(idx, sim._dF, sim.dynamic_stress(sig), dsig, A4)
+        nd = grid.n_nodes * 2
+        integ.assemble_tangent(sim, A4, integ.system.plan(sim.nodes), np.zeros(nd),
+                               np.zeros(nd, dtype=bool))
+        return integ.system.A.convert("dense").getDenseArray() if dense else None
+    return sim, internal, du, assemble, rng
+
+
+@pytest.mark.parametrize("plastic,shape", [(False, "mpm"), (True, "mpm"), (False, "cpgimp"),
+                                           (True, "cpgimp")])
+def test_implicit_fbar_tangent_matches_finite_differences(plastic, shape):
+    """The implicit F-bar tangent (kernels.fbar.fbar_stiffness, assembled by the Newton
+    integrators) is the derivative of the F-bar internal force: K d against a central
+    difference of f_int along a random direction d, at a random increment du from a
+    distorted, stressed state (nu = 0.45; von Mises yielding with its consistent tangent),
+    standard and cpGIMP shapes (the latter couples the nodes of all particles of a cell).
+    Measured relative error 5.4e-11 / 1.9e-10 (standard, elastic / plastic), 4.2e-11 /
+    2.5e-10 (cpGIMP); K unsymmetric (3-5 %). Each rank checks its own serial mesh."""
+    sim, internal, du, assemble, rng = _tangent_scene(3, plastic, shape)
+    K = assemble()
     d = rng.standard_normal(du.shape)
     eps = 1e-6
     fd = -(internal(du + eps * d)[0] - internal(du - eps * d)[0]).ravel() / (2 * eps)
@@ -149,6 +160,35 @@ def test_implicit_fbar_tangent_matches_finite_differences(plastic, shape):
     print(f"\nF-bar tangent ({'plastic' if plastic else 'elastic'}, {shape}): FD error {err:.1e}, "
           f"asymmetry {np.abs(K - K.T).max() / np.abs(K).max():.3f}")
     assert err < 1e-7, err
+
+
+def test_fbar_tangent_same_on_any_chunk_count(monkeypatch):
+    """kernels.fbar.fbar_stiffness cut into 1, 2, 3 and 5 chunks of cells (threaded; chunk c >=
+    1 adds into its own CSR values): the same matrix to round-off (1e-13 relative), on the
+    tangent test's plastic cpGIMP scene at 66 x 66 cells (17,424 particles, two chunks of
+    8192 or more: the size at which the library cuts the pass)."""
+    from fenicsmpm.integrators import linear_system
+    from fenicsmpm.kernels import fbar as kf
+    from fenicsmpm.kernels.threads import MIN_CHUNK
+    seen = []
+
+    def record(*args):
+        seen.append(args)
+        return kf.fbar_stiffness(*args)
+    monkeypatch.setattr(linear_system, "fbar_stiffness", record)
+    sim, _, _, assemble, _ = _tangent_scene(66, True, "cpgimp")
+    assert len(sim.particles) >= 2 * MIN_CHUNK
+    assemble(dense=False)
+    args = seen[-1]
+    out = []
+    for nc in (1, 2, 3, 5):
+        data = np.zeros_like(args[-1])
+        bad = kf._fbar_chunks(nc, *args[:-1], data, np.full((nc - 1,) + data.shape, np.nan))
+        assert bad == -1
+        out.append(data)
+    assert np.any(out[0] != 0.0)
+    for data in out[1:]:
+        assert np.max(np.abs(data - out[0])) <= 1e-13 * np.max(np.abs(out[0]))
 
 
 def test_implicit_fbar_w5_footing_reaches_prandtl():

@@ -7,9 +7,10 @@ n = 2 on the in-plane block in plane strain (dF_33 = 1 stays), 3 in 3D and on ax
 grids (the hoop stretch is part of the volume change). The deviatoric part of every particle's
 increment is kept; one volume change per cell instead of one constraint per particle."""
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 from ..materials.piola import det3, inv3
+from .threads import PRANGE, add_chunks1, chunk, n_chunks, particle_chunks, scratch
 from .transfer import add_block, stiffness_entry
 
 
@@ -35,7 +36,6 @@ def fbar(cell, V, dF, n_cells, n):
                     dF[p, i, j] *= s
 
 
-@njit(cache=True)
 def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, adj, constrained,
                    data):
     """The consistent (unsymmetric) tangent of the F-bar residual f_i = -sum_p V_p
@@ -54,7 +54,18 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, adj
     the plain block. With the standard family a cell's nodes are its particles' nodes; a wide
     family couples a node of p with the nodes of every particle of its cell, so the pattern
     needs one cell ring more (linear_system.stencil_rings). Returns -1, or the first local
-    particle with a node pair outside the pattern (nothing is added for that pair)."""
+    particle with a node pair outside the pattern (nothing is added for that pair).
+    Threaded as assemble_stiffness is (kernels.threads): the cells, in order, are cut into
+    one chunk per thread of about equal particle counts; chunk c >= 1 adds into its own copy
+    of the CSR values over the rows its particles touch, summed into data afterwards."""
+    nc = n_chunks(len(nodes))
+    return _fbar_chunks(nc, D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, adj,
+                        constrained, data, scratch("fbar_stiffness", nc - 1, data))
+
+
+@njit(parallel=PRANGE, cache=True)
+def _fbar_chunks(nc, D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, adj,
+                 constrained, data, buf):
     d = len(D)
     nv = nodes.shape[1]
     npart = nodes.shape[0]
@@ -72,22 +83,69 @@ def fbar_stiffness(D, nodes, dN, V, A, dF0, cell, n_cells, n, plan, nodeptr, adj
         fill[cell[p]] += 1
     J = np.empty(npart)
     h = np.empty((npart, nv, d))
+    npc = particle_chunks(npart)
+    for c in prange(npc):
+        lo, hi = chunk(npart, npc, c)
+        _inverse_gradients(dF0, dN, lo, hi, J, h)
+    if nc == 1:
+        return _fbar_cells(0, n_cells, first, order, most, J, h, nodes, dN, V, A, dF0, n,
+                           plan, nodeptr, adj, constrained, data)
+    bs2 = d * d
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    bad = np.full(nc, -1, dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(npart, nc, c)                   # cells whose particles start in [lo, hi)
+        c0 = np.searchsorted(first[:n_cells], lo)
+        c1 = np.searchsorted(first[:n_cells], hi)
+        if c == 0:
+            bad[c] = _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n,
+                                 plan, nodeptr, adj, constrained, data)
+        elif first[c1] > first[c0]:
+            a, b = 1 << 62, -1
+            for t in range(first[c0], first[c1]):
+                for k in range(nv):
+                    a = min(a, nodes[order[t], k])
+                    b = max(b, nodes[order[t], k])
+            rng[c, 0], rng[c, 1] = nodeptr[a] * bs2, nodeptr[b + 1] * bs2   # their CSR values
+            buf[c - 1, rng[c, 0]:rng[c, 1]] = 0.0
+            bad[c] = _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n,
+                                 plan, nodeptr, adj, constrained, buf[c - 1])
+    add_chunks1(data, buf, rng)
+    for c in range(nc):
+        if bad[c] >= 0:
+            return bad[c]
+    return -1
+
+
+@njit(cache=True)
+def _inverse_gradients(dF0, dN, lo, hi, J, h):
+    """J_q = det dF0_q and h_qa = dF0_q^-T grad N_aq for the particles lo..hi-1."""
+    d = h.shape[2]
     inv = np.empty((3, 3))
-    for q in range(npart):
+    for q in range(lo, hi):
         J[q] = inv3(dF0[q], inv)
-        for a in range(nv):
+        for a in range(h.shape[1]):
             for k in range(d):
                 v = 0.0
                 for l in range(d):
                     v += inv[l, k] * dN[q, a, l]
                 h[q, a, k] = v
+
+
+@njit(cache=True)
+def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan, nodeptr,
+                adj, constrained, data):
+    """fbar_stiffness's terms of the particles of cells c0..c1-1 added to data; returns -1 or
+    the first of them with a node pair outside the pattern."""
+    d = h.shape[2]
+    nv = nodes.shape[1]
     U = np.empty(most * nv, dtype=np.int64)             # the nodes of a cell's particles
     Hb = np.empty((most * nv, d))
     block = np.empty((d, d))
     Q = np.empty((d, d))
     qa = np.empty(d)
     bad = -1
-    for c in range(n_cells):
+    for c in range(c0, c1):
         if first[c + 1] == first[c]:
             continue
         nu = 0
