@@ -212,6 +212,22 @@ def test_psi_zero_no_plastic_volume_change():
             assert np.all(st[sel, 1] > 0), "psi > 0 must dilate"
 
 
+def test_faint_deviator_is_elastic_not_a_division_by_zero():
+    """A strain increment of 1e-118 (the faint front of a wave crossing a resting far field)
+    on a hydrostatic state: q2^1.5 of the trial deviator underflows to 0; the elastic check
+    (its closed-form eigenvalues) takes the state as hydrostatic instead of dividing by it
+    (a ZeroDivisionError in the 2026-12-04 Mohr-Coulomb footing on a 10 m x 4 m domain)."""
+    mat = fm.MohrCoulomb(E=E, nu=NU, density=RHO, phi=30.0, c=10e3, psi=30.0)
+    s0 = np.zeros((3, 3, 3))
+    s0[:] = -5e3 * np.eye(3)
+    s0[2] = 0.0                                    # stress-free too
+    dF = np.repeat(np.eye(3)[None], 3, axis=0)
+    dF[:, 0, 1] = 1e-118
+    dF[1, 0, 0] += 1e-118
+    sig, st = _run(mat, dF, s0, np.zeros((3, mat.n_state)))
+    assert np.array_equal(sig, _predictor(mat, dF, s0)) and np.all(st == 0.0)
+
+
 def _fd_tangent(mat, dF, s0, st0, rows, h=1e-7):
     worst = 0.0
     ds = np.zeros((len(dF), 3, 3, 3, 3))

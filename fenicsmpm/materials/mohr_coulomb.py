@@ -314,12 +314,13 @@ def _principal_closed_form(S, w):
     b00, b11, b22 = S[0, 0] - pm, S[1, 1] - pm, S[2, 2] - pm
     q2 = (b00 * b00 + b11 * b11 + b22 * b22
           + 2.0 * (S[0, 1] ** 2 + S[0, 2] ** 2 + S[1, 2] ** 2)) / 6.0
-    if q2 <= 0.0:
-        w[0] = w[1] = w[2] = pm
+    q3 = q2 ** 1.5
+    if not q3 > 0.0:                # hydrostatic, or a deviator below ~1e-108 whose q2^1.5
+        w[0] = w[1] = w[2] = pm     # underflows (e.g. the faint front of a wave): pm to round-off
         return
     det = (b00 * (b11 * b22 - S[1, 2] * S[2, 1]) - S[0, 1] * (S[1, 0] * b22 - S[1, 2] * S[2, 0])
            + S[0, 2] * (S[1, 0] * S[2, 1] - b11 * S[2, 0]))
-    r = min(1.0, max(-1.0, 0.5 * det / q2 ** 1.5))
+    r = min(1.0, max(-1.0, 0.5 * det / q3))
     ang = math.acos(r) / 3.0
     sq = 2.0 * math.sqrt(q2)
     w[2] = pm + sq * math.cos(ang)
