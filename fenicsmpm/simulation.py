@@ -15,6 +15,7 @@ from .boundaries import TractionForms
 from .boundaries import particle_layer as kl
 from .checkpoint import CheckpointMixin
 from .energy import EnergyMixin
+from .errors import raise_together
 from .guards import ParticlesLeftMesh, check_particles, check_wave_speed, particles_left
 from .io import Progress
 from .kernels import axisymmetric as axi
@@ -253,7 +254,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
                          g.affine_Jinv, self.nodes, self.N, self.dN)
         else:
-            self.nodes, self.N, self.dN = self._wide.evaluate(self)
+            self.nodes, self.N, self.dN = raise_together(self.comm, self._wide.evaluate, self)
         self.timers["locate"] += t1 - t0
         self.timers["shape"] += time.perf_counter() - t1
 

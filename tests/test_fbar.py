@@ -293,8 +293,7 @@ def test_implicit_fbar_oedometer_is_exact(shape):
 
 def test_limit_pressures_of_the_footing_scene():
     """problems.footing.limit_pressure: Prandtl's (2 + pi) c_u and Reissner's c N_c, against
-    the textbook bearing-capacity factors N_c(20 deg) = 14.83, N_c(30 deg) = 30.14;
-    mechanism_reach: Prandtl's mechanism reaches 3 b from the axis (b the half-width)."""
+    the textbook bearing-capacity factors N_c(20 deg) = 14.83, N_c(30 deg) = 30.14."""
     from fenicsmpm.problems.footing import limit_pressure
     assert limit_pressure(fm.VonMises(E=1e7, nu=0.3, density=1.0, c_u=1e4)) == \
         pytest.approx((2.0 + np.pi) * 1e4, rel=1e-14)
@@ -303,11 +302,7 @@ def test_limit_pressures_of_the_footing_scene():
         assert limit_pressure(mc) == pytest.approx(1e4 * n_c, rel=5e-4)
     with pytest.raises(ValueError, match="'soil'"):
         limit_pressure(fm.LinearElastic(E=1e7, nu=0.3, density=1.0))
-    from fenicsmpm.problems.footing import mechanism_reach, strip_footing
-    assert mechanism_reach(0.0, 0.5) == pytest.approx(1.5, rel=1e-14)     # Prandtl: 3 b
-    assert mechanism_reach(30.0, 0.5) == pytest.approx(4.79, abs=0.005)
-    with pytest.raises(ValueError, match="'phi'"):
-        mechanism_reach(90.0)
+    from fenicsmpm.problems.footing import strip_footing
     with pytest.raises(ValueError, match="'room'"):
         strip_footing(room=-1.0)
 

@@ -76,3 +76,22 @@ def test_from_points_is_distributed():
     assert np.allclose(np.sort(allx[:, 0]), np.sort(ref[:, 0]), atol=0)
     with pytest.raises(ValueError, match="outside the mesh"):
         fm.Particles.from_points(grid, mat, np.array([[1.5, 0.5]]) if comm.rank == 0 else np.zeros((0, 2)), 1e-3)
+
+
+def test_an_error_on_one_rank_is_raised_on_every_rank():
+    """errors.raise_together: a RuntimeError on the last rank only reaches every rank (the
+    others quote it), so none waits in a collective the failing rank never reaches; without
+    an error the value comes back, and in serial the call is plain."""
+    from fenicsmpm.errors import raise_together
+    comm = MPI.COMM_WORLD
+    assert raise_together(comm, lambda a: a + 1, 1) == 2
+
+    def fail_last():
+        if comm.rank == comm.size - 1:
+            raise RuntimeError("the domain of particle 7 reaches grid nodes that are not local")
+        return 0
+    with pytest.raises(RuntimeError, match="particle 7") as err:
+        raise_together(comm, fail_last)
+    if comm.size > 1 and comm.rank != comm.size - 1:
+        assert str(err.value).startswith(f"on rank {comm.size - 1}: RuntimeError: ")
+    assert comm.allreduce(1) == comm.size              # every rank is here, none hangs

@@ -22,8 +22,8 @@ curve per row).
 
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
-(problems.localisation.strip_footing(footing="particles"), fm.QuasiStatic with line_search=6,
-rtol=1e-6, library defaults otherwise: the standard family with F-bar), B/2 = 0.5 m, pushed
+(problems.localisation.strip_footing(footing="particles"), fm.QuasiStatic with the library's
+defaults: the standard family with F-bar, Newton with line_search="auto"), B/2 = 0.5 m, pushed
 30 mm in 60 steps; plateau = the mean over the last third of the push, spread = its max - min.
 Their cell size h_i = implicit_cell_size(h) puts the footing's edge at a cell centre: 2.5 /
 5.5 / 10.5 cells under B/2 (h_i = 0.2, 0.0909, 0.0476 m).
@@ -124,7 +124,7 @@ def _implicit_row(h, name, comm, nu=0.49, rough=False):
     docstring); h: the cell size (implicit_cell_size(h) in the bench)."""
     from ..problems.footing import B2, C_U, PRANDTL, tresca_soil
     from ..problems.localisation import strip_footing
-    opts = dict(footing="particles", line_search=6, rtol=1e-6, rough=rough)
+    opts = dict(footing="particles", rough=rough)
     r = strip_footing(h, material=tresca_soil(nu), width=5.0,
                       depth=3.0, half_width=B2, settlement=0.03, steps=IMPLICIT_STEPS, comm=comm,
                       **opts)

@@ -4,8 +4,10 @@ Lube et al.'s (2005) run-out and height laws (issue 21; fenicsmpm.problems.granu
     python -m fenicsmpm.bench granular-collapse [--quick] [--out DIR]
 
 Rows: aspect ratios a = H0 / L0 = 0.5, 1, 2, 4 with the library's defaults (fm.Explicit(),
-dt='auto', shape='auto'), h = min(L0, H0) / 16 (quick: a = 0.5 and 2, h = min / 8). Metrics per
-row: the run-out (L_inf - L0) / L0 and final height H_inf / L0, their relative errors against
+dt='auto', shape='auto': the standard family for Mohr-Coulomb, 2 x 2 particles per cell), and
+the same with RECOMMENDED = cpGIMP and 3 x 3 particles per cell (rows a<a>-cpgimp-ppc3),
+h = min(L0, H0) / 16 (quick: a = 0.5 and 2 with the defaults, a = 2 recommended, h = min / 8).
+Metrics per row: the run-out (L_inf - L0) / L0 and final height H_inf / L0, their relative errors against
 Lube's laws, the time to rest t_rest / T (T = sqrt(H0 / g); nan: still moving at 8 T), whether
 the run finished, and the particle-updates per second. Writes out/granular-collapse.json and
 out/granular-collapse.png (the mean speed against t / T per row, and run-out / height against
@@ -18,21 +20,27 @@ import numpy as np
 from . import common
 
 CASE = "granular-collapse"
+RECOMMENDED = dict(shape="cpgimp", per_cell=3)    # meets Lube's laws at every a (docs/guide/choosing.md)
+SERIES = (("", {}), ("-cpgimp-ppc3", RECOMMENDED))
 
 
-def _row(a, cells, comm):
+def _row(a, cells, comm, label="", **scene):
+    """One collapse (problems.granular_collapse.collapse(a, cells, **scene)) as a bench record
+    named a<a><label>."""
     from ..problems.granular_collapse import collapse
     t0 = time.perf_counter()
-    r = collapse(a, cells=cells, comm=comm)
+    r = collapse(a, cells=cells, comm=comm, **scene)
     wall = common.gmax(comm, time.perf_counter() - t0)
     m = dict(runout=r["runout"], runout_error=r["runout_error"], height=r["height"],
              height_error=r["height_error"], t_rest=r["t_rest"], t_end=r["t_end"],
              finished=float(r["finished"]),
              updates_per_s=r["particles"] * r["steps"] / max(wall, 1e-12))
     cfg = dict(integrator="Explicit", scheme="MUSL", shape=r["shape"], h=None, dt=r["dt"],
-               ppc=4, cell_type="quadrilateral", aspect_ratio=a, cells_across=cells)
-    rec = common.make_record(f"a{a:g}", cfg, r["particles"], 0, r["steps"], wall, m)
+               ppc=scene.get("per_cell", 2) ** 2, cell_type="quadrilateral", aspect_ratio=a,
+               cells_across=cells)
+    rec = common.make_record(f"a{a:g}{label}", cfg, r["particles"], 0, r["steps"], wall, m)
     rec["mean_speed"] = r["mean_speed"]
+    rec["series"] = label.strip("-") or "defaults"
     if r["error"]:
         rec["error"] = r["error"]
     return rec
@@ -43,8 +51,11 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
-    for a in ((0.5, 2.0) if quick else (0.5, 1.0, 2.0, 4.0)):
-        r = _row(a, 8 if quick else 16, comm)
+    rows = [(a, label, scene) for label, scene in SERIES
+            for a in ((0.5, 2.0) if quick and not label else (2.0,) if quick
+                      else (0.5, 1.0, 2.0, 4.0))]
+    for a, label, scene in rows:
+        r = _row(a, 8 if quick else 16, comm, label, **scene)
         runs.append(r)
         m = r["metrics"]
         say(f"{r['name']}: run-out {m['runout']:.3f} ({m['runout_error']:+.1%}), height "
@@ -71,9 +82,14 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
         aa = np.linspace(0.3, 4.5, 100)
         ax2.plot(aa, [lube_runout(x) for x in aa], "k-", lw=0.8, label="Lube: run-out")
         ax2.plot(aa, [lube_height(x) for x in aa], "k--", lw=0.8, label="Lube: height")
-        ar = [r["config"]["aspect_ratio"] for r in runs]
-        ax2.plot(ar, [r["metrics"]["runout"] for r in runs], "o", label="(L_inf - L0) / L0")
-        ax2.plot(ar, [r["metrics"]["height"] for r in runs], "s", label="H_inf / L0")
+        for label, _ in SERIES:
+            name = label.strip("-") or "defaults"
+            rs = [r for r in runs if r["series"] == name]
+            ar = [r["config"]["aspect_ratio"] for r in rs]
+            ax2.plot(ar, [r["metrics"]["runout"] for r in rs], "o" if not label else "^",
+                     label=f"(L_inf - L0) / L0, {name}")
+            ax2.plot(ar, [r["metrics"]["height"] for r in rs], "s" if not label else "v",
+                     label=f"H_inf / L0, {name}")
         ax2.set_xlabel("aspect ratio a = H0 / L0")
         ax2.legend(fontsize=7)
     common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,

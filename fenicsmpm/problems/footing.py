@@ -43,21 +43,6 @@ def limit_pressure(soil):
     return soil.c * (n_q - 1.0) / math.tan(phi)
 
 
-def mechanism_reach(phi, half_width=B2):
-    """How far from the footing's axis Prandtl's (phi = 0) or Reissner's (phi > 0, associated
-    flow) failure mechanism reaches the surface [m], for a smooth strip footing of half-width
-    b on weightless soil: the active wedge's side r0 = b / cos(45 deg + phi/2), the log
-    spiral r1 = r0 exp((pi/2) tan phi), the passive wedge's base 2 r1 cos(45 deg - phi/2):
-        x_max = b + 2 r1 cos(45 deg - phi/2)
-    (3 b for phi = 0; 3.03 m at phi = 20 deg and 4.79 m at 30 deg for b = 0.5 m). A roller
-    side closer than this cuts the mechanism. phi in degrees."""
-    if not 0.0 <= phi < 90.0:
-        raise ValueError(f"mechanism_reach: 'phi' must be in [0, 90) degrees, got {phi!r}")
-    p = math.radians(phi)
-    r1 = half_width / math.cos(0.25 * math.pi + 0.5 * p) * math.exp(0.5 * math.pi * math.tan(p))
-    return half_width + 2.0 * r1 * math.cos(0.25 * math.pi - 0.5 * p)
-
-
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
                   shape="auto", fbar=None, mu=0.0, soil=None, room=None, comm=None,
                   algorithm="multi-velocity"):
