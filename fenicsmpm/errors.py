@@ -3,7 +3,8 @@ fm.CheckpointNotFoundError). Everything else fenicsmpm raises is a built-in type
 or TypeError for bad input (the message names the parameter), NotImplementedError for a
 combination that is not supported, FloatingPointError and RuntimeError from the guards (a
 non-finite, inverted or collapsed particle; a Newton or KSP failure), each naming the step,
-the time and the first particles concerned. Under MPI every rank raises the same error."""
+the time and the first particles concerned. Under MPI every rank raises the same error
+(raise_together for a check that only one rank can make)."""
 
 
 class ParticlesLeftMesh(RuntimeError):
@@ -40,4 +41,4 @@ def raise_together(comm, fn, *args):
     raise RuntimeError(f"on rank {first}: {msg}")
 
 
-__all__ = ["ParticlesLeftMesh", "CheckpointNotFoundError"]
+__all__ = ["ParticlesLeftMesh", "CheckpointNotFoundError", "raise_together"]
