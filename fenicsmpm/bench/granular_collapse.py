@@ -21,12 +21,14 @@ from . import common
 
 CASE = "granular-collapse"
 RECOMMENDED = dict(shape="cpgimp", per_cell=3)    # meets Lube's laws at every a (docs/guide/choosing.md)
-SERIES = (("", {}), ("-cpgimp-ppc3", RECOMMENDED))
+# series name, scene options, aspect ratios (full, quick)
+SERIES = (("defaults", {}, (0.5, 1.0, 2.0, 4.0), (0.5, 2.0)),
+          ("cpgimp-ppc3", RECOMMENDED, (0.5, 1.0, 2.0, 4.0), (2.0,)))
 
 
-def _row(a, cells, comm, label="", **scene):
+def _row(a, cells, comm, series="defaults", **scene):
     """One collapse (problems.granular_collapse.collapse(a, cells, **scene)) as a bench record
-    named a<a><label>."""
+    named a<a> (defaults) or a<a>-<series>."""
     from ..problems.granular_collapse import collapse
     t0 = time.perf_counter()
     r = collapse(a, cells=cells, comm=comm, **scene)
@@ -38,9 +40,10 @@ def _row(a, cells, comm, label="", **scene):
     cfg = dict(integrator="Explicit", scheme="MUSL", shape=r["shape"], h=None, dt=r["dt"],
                ppc=scene.get("per_cell", 2) ** 2, cell_type="quadrilateral", aspect_ratio=a,
                cells_across=cells)
-    rec = common.make_record(f"a{a:g}{label}", cfg, r["particles"], 0, r["steps"], wall, m)
+    name = f"a{a:g}" if series == "defaults" else f"a{a:g}-{series}"
+    rec = common.make_record(name, cfg, r["particles"], 0, r["steps"], wall, m)
     rec["mean_speed"] = r["mean_speed"]
-    rec["series"] = label.strip("-") or "defaults"
+    rec["series"] = series
     if r["error"]:
         rec["error"] = r["error"]
     return rec
@@ -51,11 +54,10 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
-    rows = [(a, label, scene) for label, scene in SERIES
-            for a in ((0.5, 2.0) if quick and not label else (2.0,) if quick
-                      else (0.5, 1.0, 2.0, 4.0))]
-    for a, label, scene in rows:
-        r = _row(a, 8 if quick else 16, comm, label, **scene)
+    rows = [(a, series, scene) for series, scene, full, fast in SERIES
+            for a in (fast if quick else full)]
+    for a, series, scene in rows:
+        r = _row(a, 8 if quick else 16, comm, series, **scene)
         runs.append(r)
         m = r["metrics"]
         say(f"{r['name']}: run-out {m['runout']:.3f} ({m['runout_error']:+.1%}), height "
@@ -82,14 +84,13 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
         aa = np.linspace(0.3, 4.5, 100)
         ax2.plot(aa, [lube_runout(x) for x in aa], "k-", lw=0.8, label="Lube: run-out")
         ax2.plot(aa, [lube_height(x) for x in aa], "k--", lw=0.8, label="Lube: height")
-        for label, _ in SERIES:
-            name = label.strip("-") or "defaults"
-            rs = [r for r in runs if r["series"] == name]
+        for (series, *_), marks in zip(SERIES, ("os", "^v")):
+            rs = [r for r in runs if r["series"] == series]
             ar = [r["config"]["aspect_ratio"] for r in rs]
-            ax2.plot(ar, [r["metrics"]["runout"] for r in rs], "o" if not label else "^",
-                     label=f"(L_inf - L0) / L0, {name}")
-            ax2.plot(ar, [r["metrics"]["height"] for r in rs], "s" if not label else "v",
-                     label=f"H_inf / L0, {name}")
+            ax2.plot(ar, [r["metrics"]["runout"] for r in rs], marks[0],
+                     label=f"(L_inf - L0) / L0, {series}")
+            ax2.plot(ar, [r["metrics"]["height"] for r in rs], marks[1],
+                     label=f"H_inf / L0, {series}")
         ax2.set_xlabel("aspect ratio a = H0 / L0")
         ax2.legend(fontsize=7)
     common.save_figure(fig, os.path.join(out, f"{CASE}.png"), comm,
