@@ -116,6 +116,44 @@ def test_more_nodes_than_the_last_step_are_all_kept(rng):
     assert grew and worst < 1e-12, (before, sim.nodes.shape, pu, gsum)
 
 
+def _dense(nodes, W, grid):
+    """The padded weights (or gradients) W of every particle as a dense (n, nodes, ...) array."""
+    out = np.zeros((nodes.shape[0], grid.n_nodes) + W.shape[2:])
+    np.add.at(out, (np.arange(nodes.shape[0])[:, None], nodes), W)
+    return out
+
+
+def test_a_cpgimp_box_stretches_to_one_cell_each_side_and_no_further(rng):
+    """A cpGIMP box follows F_kk up to a half-width of one cell (gimp.half_width): stretched
+    20x along x (l_p^0 = L / 4, so 5 L uncapped) a particle's weights equal uGIMP's for the
+    half-width L exactly, at most 4 nodes per axis; partition of unity and the affine
+    reproduction stay exact (1e-12). On any partition the box then reaches only the cells next
+    to the particle's, so the run does not stop with a ghost-layer error."""
+    grid = structured(MPI.COMM_WORLD, CT.quadrilateral)
+    pts = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2)
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-5, shape="cpgimp")
+    L = grid._structured["spacing"]
+    pts.F[:, 0, 0] = 20.0
+    sim.locate_and_shape()
+    N, dN, nodes = sim.N.copy(), sim.dN.copy(), sim.nodes.copy()
+    half = kg.half_widths(pts.gimp_l0, pts.F, L, True)
+    assert np.allclose(half[:, 0], L[0]) and np.allclose(half[:, 1], L[1] / 4)
+    A, b = rng.normal(size=(2, 2)), rng.normal(size=2)
+    u = grid.node_x @ A.T + b
+    pu = np.abs(N.sum(axis=1) - 1).max() if len(pts) else 0.0
+    grad = np.abs(np.einsum("pai,paj->pij", u[nodes], dN) - A).max() if len(pts) else 0.0
+    # the same particles as uGIMP boxes of half-widths (L, L / 4)
+    pts.F[:, 0, 0] = 1.0
+    pts.gimp_l0[:, 0] = L[0]
+    sim.locate_and_shape()
+    same = max(np.abs(_dense(nodes, N, grid) - _dense(sim.nodes, sim.N, grid)).max(),
+               np.abs(_dense(nodes, dN, grid) - _dense(sim.nodes, sim.dN, grid)).max())
+    comm = MPI.COMM_WORLD
+    worst = comm.allreduce(max(pu, grad, same), op=MPI.MAX)
+    width = comm.allreduce(nodes.shape[1], op=MPI.MAX)
+    assert worst < 1e-12 and width <= 4 * 3, (pu, grad, same, width)
+
+
 def soft_column(shape, comm=MPI.COMM_WORLD, n_cells=20, cell_type=CT.quadrilateral):
     """BENCHMARKS L1 soft column, explicit MUSL, seed-002 sine ramp of gravity over T/2,
     held to T. Returns (initial positions X0, sigma_yy) of the local particles."""

@@ -39,6 +39,7 @@ from numba import njit
 
 from ..kernels import transfer as kt
 from ..shapes.cmpm import CompositeBasis
+from ..shapes.gimp import half_widths
 from .implicit import Newmark, QuasiStatic
 
 __all__ = ["DoubleMappingQuasiStatic", "DoubleMappingNewmark"]
@@ -182,10 +183,7 @@ class _DoubleMapping:
             self._omp = nmp
         omp = self._omp[p.cell]
         self._corr = np.where(omp > 0, omp / np.maximum(nmp[p.cell], 1), 1.0)
-        lbox = p.gimp_l0
-        if sim.shape == "cpgimp":
-            lbox = lbox * np.abs(np.diagonal(p.F, axis1=1, axis2=2)[:, :d])
-        self._lbox = np.ascontiguousarray(lbox)
+        self._lbox = half_widths(p.gimp_l0, p.F, sim._wide.lat["spacing"], sim.shape == "cpgimp")
         rmax = float((self._lbox / sim._wide.lat["spacing"]).max()) if len(p) else 0.5
         self._nmax = int(np.ceil(2.0 * rmax)) + 1
         self._cmpm = self.basis.evaluate(p.x, p.cell, self.basis.material(nmp))

@@ -259,12 +259,9 @@ def stencil_rings(sim):
 def _family_rings(sim, shape):
     """stencil_rings of a wide family without F-bar."""
     if shape in ("ugimp", "cpgimp"):
+        from ..shapes.gimp import max_half_width
         p, lat = sim.particles, sim._wide.lat
-        d = sim.gdim
-        r = p.gimp_l0 / lat["spacing"]
-        if shape == "cpgimp":
-            r = r * np.abs(np.diagonal(p.F, axis1=1, axis2=2)[:, :d])
-        rmax = float(r.max()) if r.size else 0.0
+        rmax = max_half_width(p.gimp_l0, p.F, lat["spacing"], shape == "cpgimp") if len(p) else 0.0
         if sim.comm.size > 1:
             from mpi4py import MPI
             rmax = sim.comm.allreduce(rmax, op=MPI.MAX)

@@ -20,7 +20,11 @@ grid it is cut at the grid boundary ([a, b] clipped to the grid's extent), so th
 still sum to 1 and the gradients to 0.
 
 uGIMP keeps l_p = l_p^0; cpGIMP (contiguous particle GIMP, Wallstedt & Guilkey 2008) uses
-l_p,k = l_p,k^0 |F_kk| (the box follows the stretch along each axis).
+l_p,k = min(l_p,k^0 |F_kk|, L_k) (the box follows the stretch along each axis, up to one cell
+each side: a box then reaches only the nodes of the cells next to the particle's, which one
+ghost-cell ring holds on every rank, so an extreme stretch (a thinning granular front) gives
+the same weights on any partition; past the cap the particle's mass is spread as a box of
+one cell's half-width, as uGIMP does for a particle of that size).
 """
 import numpy as np
 from numba import njit, prange
@@ -68,6 +72,24 @@ def weight_1d(xp, lp, xi_node, L, lo, hi):
     a = max(xp - lp, lo)
     b = min(xp + lp, hi)
     return _weight(a, b, 1.0 / (b - a), xi_node, L, 1.0 / L, 0.5 / L)
+
+
+@njit(cache=True)
+def half_width(lp0, Fkk, L, contiguous):
+    """The box half-width along one axis: min(lp0 |F_kk|, L) for cpGIMP (contiguous), lp0 for
+    uGIMP (module docstring)."""
+    return min(lp0 * abs(Fkk), L) if contiguous else lp0
+
+
+@njit(cache=True)
+def half_widths(lp0, F, spacing, contiguous):
+    """(n, d) box half-widths of every particle (half_width per axis)."""
+    n, d = lp0.shape
+    out = np.empty((n, d))
+    for p in range(n):
+        for k in range(d):
+            out[p, k] = half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous)
+    return out
 
 
 @njit(cache=True)
@@ -150,8 +172,8 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
     for p in range(p0, p1):
         stride = 1
         for k in range(d):
-            lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
             L = spacing[k]
+            lp = half_width(lp0[p, k], F[p, k, k], L, contiguous)
             a = max(x[p, k] - lp, lo[k])
             b = min(x[p, k] + lp, hi[k])
             inv_w = 1.0 / (b - a)
@@ -172,13 +194,11 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
 
 @njit(cache=True)
 def max_half_width(lp0, F, spacing, contiguous):
-    """max over particles and axes of l_pk / L_k, l_pk = lp0_pk |F_kk| (cpGIMP, contiguous) or
-    lp0_pk (uGIMP)."""
+    """max over particles and axes of l_pk / L_k (l_pk = half_width)."""
     r = 0.0
     for p in range(lp0.shape[0]):
         for k in range(lp0.shape[1]):
-            lp = lp0[p, k] * abs(F[p, k, k]) if contiguous else lp0[p, k]
-            r = max(r, lp / spacing[k])
+            r = max(r, half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous) / spacing[k])
     return r
 
 
@@ -188,7 +208,7 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
     """GIMP weights of every particle on the lattice nodes its box overlaps.
 
     x (n, d) positions; lp0 (n, d) initial half-widths; F (n, 3, 3): with `contiguous` the
-    half-widths are lp0_k |F_kk| (cpGIMP), else lp0 (uGIMP). origin/spacing: global lattice
+    half-widths are min(lp0_k |F_kk|, L_k) (cpGIMP), else lp0 (uGIMP). origin/spacing: global lattice
     origin and cell size per axis; lo/hi: the grid's extent (boxes are clipped to it);
     table: local node index of lattice point ilo + j (j < nlat, flat, axis 0 fastest), or
     -1 where the point is not a local node. ns: nodes per axis looked at, ceil(2 l / L) + 2,
@@ -349,5 +369,5 @@ class GimpShape(LatticeShape):
 _RING_MESSAGE = ("{name} shape functions span neighbouring cells, whose nodes must be local: "
                  "in parallel, create the mesh with partitioner="
                  "fenicsmpm.grid.vertex_ghost_partitioner() (the shared-vertex ghost layer; "
-                 "dolfinx 0.5 disables GhostMode.shared_vertex) and keep particle domains no "
+                 "dolfinx 0.5 disables GhostMode.shared_vertex) and keep uGIMP particle domains no "
                  "larger than a cell")
