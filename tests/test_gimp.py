@@ -49,7 +49,8 @@ def closed_form(xi, L, lp):
                                 0.75, 0.9, 1.2, 1.25, 1.4])
 def test_weight_closed_form(xi):
     L, lp = 1.0, 0.25
-    S, dS = kg.weight_1d(3.0 + xi, lp, 3.0, L, -100.0, 100.0)
+    a, b = 3.0 + xi - lp, 3.0 + xi + lp             # the box of a particle at 3 + xi
+    S, dS = kg._weight(a, b, 1.0 / (b - a), 3.0, L, 1.0 / L, 0.5 / L)
     S_ref, dS_ref = closed_form(xi, L, lp)
     assert abs(S - S_ref) < 1e-14 and abs(dS - dS_ref) < 1e-14, (xi, S, S_ref, dS, dS_ref)
 

@@ -54,24 +54,16 @@ def _hat(s, L, inv_L):
 
 @njit(cache=True)
 def _weight(a, b, inv_w, xi_node, L, inv_L, inv_2L):
-    """S and dS of the node at xi_node for the clipped box [a, b] (inv_w = 1 / (b - a))."""
+    """1D GIMP weight S and gradient dS of the node at xi_node for the box [a, b], already
+    clipped to the grid (module docstring; inv_w = 1 / (b - a), inv_L = 1 / L, inv_2L = 0.5 / L:
+    reciprocals a particle's kernel computes once per axis). A box that overlaps the node's
+    support by less than 1e-12 L gets exactly 0 (its weight, below 1e-24, is round-off of a
+    box that ends on the support's edge)."""
     if b - xi_node <= -L * (1.0 - 1e-12) or a - xi_node >= L * (1.0 - 1e-12):
         return 0.0, 0.0
     S = _integral(a - xi_node, b - xi_node, L, inv_2L) * inv_w
     dS = (_hat(b - xi_node, L, inv_L) - _hat(a - xi_node, L, inv_L)) * inv_w
     return S, dS
-
-
-@njit(cache=True)
-def weight_1d(xp, lp, xi_node, L, lo, hi):
-    """1D GIMP weight and gradient of the node at xi_node for the box [xp - lp, xp + lp]
-    clipped to [lo, hi] (see the module docstring). A box that overlaps the node's support
-    by less than 1e-12 L gets exactly 0 (its weight, below 1e-24, is round-off of a box that
-    ends on the support's edge). The divisions are by reciprocals computed once (a particle's
-    kernel computes them once per axis)."""
-    a = max(xp - lp, lo)
-    b = min(xp + lp, hi)
-    return _weight(a, b, 1.0 / (b - a), xi_node, L, 1.0 / L, 0.5 / L)
 
 
 @njit(cache=True)
