@@ -22,7 +22,7 @@ from numba import njit, prange
 from ..materials.linear_elastic import jaumann_update
 from ..materials.piola import det3, work_increment
 from .threads import PRANGE, chunk, particle_chunks
-from .transfer import commit_particle, inversion_flag, particle_dF
+from .transfer import commit_particle, inversion_flag, particle_dF, row_length
 
 
 @njit(cache=True)
@@ -58,7 +58,7 @@ def _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo
     s = np.empty((3, 3))
     for p in range(lo, hi):
         dF[0, 0], dF[0, 1], dF[1, 0], dF[1, 1] = 1.0, 0.0, 0.0, 1.0
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             n = nodes[p, a]
             for i in range(2):
                 wi = scale * w[n, i]

@@ -2,7 +2,9 @@
 particle-quadrature stiffness into a CSR array.
 
 Shape data are padded arrays: nodes[p, a] (node index), N[p, a] (weight) and dN[p, a, :]
-(gradient). `D` is a tuple of length gdim: its length is a compile-time constant for numba,
+(gradient). A wide family's rows differ in length: each lists its nodes once, then repeats
+the last one with N = dN = 0 (pad_row), and the passes stop at the padding (row_length), so
+a particle whose box touches 4 of the 9 columns costs 4. `D` is a tuple of length gdim: its length is a compile-time constant for numba,
 so the short loops over dimensions are unrolled (about 2x faster than a runtime d).
 Every grid integral is a particle sum with weight V_p (DESIGN.md):
   m_i = sum_p N_ip m_p,   (m v)_i = sum_p N_ip m_p v_p,
@@ -20,11 +22,37 @@ from .threads import (PRANGE, add_chunks1, add_chunks2, chunk, n_chunks, node_ra
                       particle_chunks, scratch)
 
 
+# ---------------------------------------------------------------------- padded rows
+@njit(cache=True)
+def row_length(nodes, p):
+    """The columns of particle p's row before its padding. A row lists its nodes once each;
+    a wide family pads it by repeating its last node with N = dN = 0 (pad_row), so the first
+    column equal to the one before starts the padding. A pass over the row may stop there:
+    the padding adds exact zeros (a row padded otherwise is just read to its end)."""
+    nv = nodes.shape[1]
+    for a in range(1, nv):
+        if nodes[p, a] == nodes[p, a - 1]:
+            return a
+    return nv
+
+
+@njit(cache=True)
+def pad_row(d, p, cnt, fallback, nodes_out, N_out, dN_out):
+    """Pad particle p's row after its cnt nodes (row_length): columns cnt.. repeat the last
+    node (`fallback`, a valid node, when cnt = 0) with N = dN = 0."""
+    pad = nodes_out[p, cnt - 1] if 0 < cnt <= nodes_out.shape[1] else fallback
+    for a in range(cnt, nodes_out.shape[1]):
+        nodes_out[p, a] = pad
+        N_out[p, a] = 0.0
+        for k in range(d):
+            dN_out[p, a, k] = 0.0
+
+
 # ---------------------------------------------------------------------- P2G
 @njit(cache=True)
 def _mass(nodes, N, mass, lo, hi, m_out):
     for p in range(lo, hi):
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             m_out[nodes[p, a]] += N[p, a] * mass[p]
 
 
@@ -56,7 +84,7 @@ def _mass_momentum(D, nodes, N, mass, v, lo, hi, m_out, mv_out):
     d = len(D)
     for p in range(lo, hi):
         mp = mass[p]
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             w = N[p, a] * mp
             i = nodes[p, a]
             m_out[i] += w
@@ -94,7 +122,7 @@ def _p2g_mass_momentum_chunks(nc, D, nodes, N, mass, v, m_out, mv_out, mb, mvb):
 def _weighted(D, nodes, N, mass, q, lo, hi, out):
     d = len(D)
     for p in range(lo, hi):
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             w = N[p, a] * mass[p]
             i = nodes[p, a]
             for k in range(d):
@@ -128,7 +156,7 @@ def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, buf):
 def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out):
     d = len(D)
     for p in range(lo, hi):
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             i = nodes[p, a]
             for k in range(d):
                 s = 0.0
@@ -168,7 +196,7 @@ def _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, m_out, mv_out
     d = len(D)
     for p in range(lo, hi):
         mp = mass[p]
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             w = N[p, a] * mp
             i = nodes[p, a]
             if with_mass:
@@ -218,18 +246,19 @@ def _restrict(D, nodes, N, dN, active, field, lo, hi):
     for p in range(lo, hi):
         f = field[p]
         full = True
-        for a in range(nodes.shape[1]):
+        m = row_length(nodes, p)
+        for a in range(m):
             if not active[nodes[p, a], f]:
                 full = False
         if full:
             continue
         for k in range(d):
             s[k] = 0.0
-        for a in range(nodes.shape[1]):
+        for a in range(m):
             if active[nodes[p, a], f]:
                 for k in range(d):
                     s[k] += dN[p, a, k]
-        for a in range(nodes.shape[1]):
+        for a in range(m):
             if active[nodes[p, a], f]:
                 for k in range(d):
                     dN[p, a, k] -= N[p, a] * s[k]
@@ -260,10 +289,11 @@ def restrict_gradients(D, nodes, N, dN, active, field):
 def _flip_blend(D, nodes, N, old, new, flip, q, lo, hi):
     d = len(D)
     for p in range(lo, hi):
+        m = row_length(nodes, p)
         for k in range(d):
             dq = 0.0
             qn = 0.0
-            for a in range(nodes.shape[1]):
+            for a in range(m):
                 i = nodes[p, a]
                 dq += N[p, a] * (new[i, k] - old[i, k])
                 qn += N[p, a] * new[i, k]
@@ -291,7 +321,7 @@ def particle_dF(D, nodes, dN, w, scale, p, out):
     for i in range(3):
         for j in range(3):
             out[i, j] = 1.0 if i == j else 0.0
-    for a in range(nodes.shape[1]):
+    for a in range(row_length(nodes, p)):
         n = nodes[p, a]
         for i in range(d):
             wi = scale * w[n, i]
@@ -323,11 +353,12 @@ def incremental_F(D, nodes, dN, w, scale, dF_out):
 @njit(cache=True)
 def g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p):
     """Particle p's update of g2p."""
+    m = row_length(nodes, p)
     for k in range(len(D)):
         dx = 0.0
         dv = 0.0
         vp = 0.0
-        for a in range(nodes.shape[1]):
+        for a in range(m):
             i = nodes[p, a]
             w = N[p, a]
             dx += w * du[i, k]
@@ -364,7 +395,7 @@ def _g2p_momentum(D, nodes, N, du, v_old, v_new, flip, x, v, u, mass, lo, hi, mv
     d = len(D)
     for p in range(lo, hi):
         g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p)
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             w = N[p, a] * mass[p]
             i = nodes[p, a]
             for k in range(d):
@@ -407,7 +438,8 @@ def _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo,
     for p in range(lo, hi):
         B[:] = 0.0
         Dm[:] = 0.0
-        for a in range(nodes.shape[1]):
+        m = row_length(nodes, p)
+        for a in range(m):
             i = nodes[p, a]
             w = N[p, a]
             for k in range(d):
@@ -430,14 +462,14 @@ def _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo,
             for k in range(d):
                 for l in range(d):
                     c = 0.0
-                    for a in range(nodes.shape[1]):
+                    for a in range(m):
                         c += v_new[nodes[p, a], k] * dN[p, a, l]
                     C[p, k, l] = c
         for k in range(d):
             dx = 0.0
             dv = 0.0
             vp = 0.0
-            for a in range(nodes.shape[1]):
+            for a in range(m):
                 i = nodes[p, a]
                 dx += N[p, a] * du[i, k]
                 dv += N[p, a] * (v_new[i, k] - v_old[i, k])
@@ -648,7 +680,8 @@ def _stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, lo, hi, data):
     G = np.empty((n, d, d, d))
     block = np.empty((d, d))
     for p in range(lo, hi):
-        for a in range(n):
+        m = row_length(nodes, p)             # the padding's blocks are zero
+        for a in range(m):
             for r in range(d):
                 for c in range(d):
                     for L in range(d):
@@ -656,10 +689,10 @@ def _stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, lo, hi, data):
                         for J in range(d):
                             s += dN[p, a, J] * A[p, r, J, c, L]
                         G[a, r, c, L] = V[p] * s
-        for a in range(n):
+        for a in range(m):
             i = nodes[p, a]
             deg = nodeptr[i + 1] - nodeptr[i]
-            for b in range(n):
+            for b in range(m):
                 for r in range(d):
                     for c in range(d):
                         s = 0.0

@@ -30,6 +30,7 @@ import numpy as np
 from numba import njit, prange
 
 from ..kernels.threads import PRANGE, chunk, particle_chunks
+from ..kernels.transfer import pad_row
 from .gimp import PaddedStencil
 
 N_CORNERS = 4
@@ -428,11 +429,7 @@ def _cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out, lo, 
                 for k in range(d):
                     dN_out[p, slot, k] += g[p, c, k] * s / V
         count_out[p] = cnt
-        for a in range(cnt, nv):
-            nodes_out[p, a] = nodes_out[p, 0]
-            N_out[p, a] = 0.0
-            for k in range(d):
-                dN_out[p, a, k] = 0.0
+        pad_row(d, p, cnt, nodes_out[p, 0], nodes_out, N_out, dN_out)
 
 
 @njit(parallel=PRANGE, cache=True)
@@ -441,7 +438,7 @@ def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
 
     cnodes, cN: (n, nc, nvc) grid nodes and standard shape values at each of the nc corners
     (4 in 2D, 8 in 3D); w (n, nc), g (n, nc, gdim) from corner_weights/corner_weights3. Nodes shared by several corners are merged: each node
-    appears once (count_out[p] of them), then padding (a valid node with N = dN = 0); a
+    appears once (count_out[p] of them), then padding (kernels.transfer.pad_row); a
     particle with more nodes than the outputs have columns gets only the first ones written
     and a count above the columns (the caller evaluates again with all ncor nvc columns)."""
     n = cnodes.shape[0]

@@ -22,6 +22,8 @@ the particle's own cell, extended linearly (PU and affine reproduction still hol
 import numpy as np
 from numba import njit
 
+from ..kernels.transfer import pad_row
+
 N_GAUSS = 4
 
 
@@ -47,7 +49,7 @@ def gauss_combine(D, gnodes, gN, gdN, nodes_out, N_out, dN_out, count_out):
 
     gnodes, gN: (n, 4, nvc), gdN (n, 4, nvc, d): the standard shape functions at each Gauss
     point. Nodes shared by several Gauss points are merged: each node appears once
-    (count_out[p] of them), then padding (a valid node with N = dN = 0)."""
+    (count_out[p] of them), then padding (kernels.transfer.pad_row)."""
     d = len(D)
     nv = nodes_out.shape[1]
     for p in range(gnodes.shape[0]):
@@ -70,11 +72,7 @@ def gauss_combine(D, gnodes, gN, gdN, nodes_out, N_out, dN_out, count_out):
                 for k in range(d):
                     dN_out[p, slot, k] += 0.25 * gdN[p, g, a, k]
         count_out[p] = cnt
-        for a in range(cnt, nv):
-            nodes_out[p, a] = nodes_out[p, 0]
-            N_out[p, a] = 0.0
-            for k in range(d):
-                dN_out[p, a, k] = 0.0
+        pad_row(d, p, cnt, nodes_out[p, 0], nodes_out, N_out, dN_out)
 
 
 class GaussGimpShape:

@@ -31,6 +31,7 @@ from numba import njit, prange
 
 from ..kernels.axisymmetric import meridian_area
 from ..kernels.threads import PRANGE, chunk, particle_chunks
+from ..kernels.transfer import pad_row
 
 
 @njit(cache=True)
@@ -85,21 +86,6 @@ def half_widths(lp0, F, spacing, contiguous):
 
 
 @njit(cache=True)
-def _pad(d, p, cnt, pad, nodes_out, N_out, dN_out, count_out):
-    """Close particle p's row after its cnt nonzero-weight nodes: count_out[p] = cnt, the
-    remaining columns a valid node (`pad`, a zero-weight node seen, else the first node) with
-    N = dN = 0."""
-    count_out[p] = cnt
-    if pad < 0 and cnt > 0:
-        pad = nodes_out[p, 0]
-    for a in range(cnt, nodes_out.shape[1]):
-        nodes_out[p, a] = pad
-        N_out[p, a] = 0.0
-        for k in range(d):
-            dN_out[p, a, k] = 0.0
-
-
-@njit(cache=True)
 def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
                    nodes_out, N_out, dN_out, count_out):
     """Write particle p's tensor-product weights into row p of the outputs (shared by the
@@ -107,11 +93,12 @@ def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
     derivatives of the ns lattice nodes looked at per axis; off (d, ns): their flat lattice
     offsets (-1: outside the local lattice). Node (a, b, c) has the weight Sx_a Sy_b Sz_c and
     the gradient (dSx_a Sy_b Sz_c, dSy_b Sx_a Sz_c, dSz_c Sx_a Sy_b) (missing axes: factor 1),
-    in nested loops, axis 0 fastest. A node of weight 0 is skipped (and kept as padding),
+    in nested loops, axis 0 fastest. A node of weight 0 is skipped (the first one seen pads
+    a row that has no other node),
     unless `keep_gradients` and one of its gradient components is not 0 (a node whose 1D
     weight vanishes at the particle with a nonzero slope, e.g. the boundary-modified B-spline
     at the grid boundary). Nonzero-weight nodes first (count_out[p] of them, only the first
-    nodes_out.shape[1] written), then padding (_pad). Returns True when a node of nonzero
+    nodes_out.shape[1] written), then padding (kernels.transfer.pad_row). Returns True when a node of nonzero
     weight is not a local node."""
     nv = nodes_out.shape[1]
     bad = False
@@ -147,7 +134,8 @@ def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
                     if d == 3:
                         dN_out[p, cnt, 2] = dSz * Sk[0, a] * Sy
                 cnt += 1
-    _pad(d, p, cnt, pad, nodes_out, N_out, dN_out, count_out)
+    count_out[p] = cnt
+    pad_row(d, p, cnt, pad, nodes_out, N_out, dN_out)
     return bad
 
 
