@@ -11,7 +11,7 @@ from numba import njit, prange
 
 from ..materials.piola import det3, inv3
 from .threads import PRANGE, add_chunks1, chunk, n_chunks, particle_chunks, scratch
-from .transfer import add_block, stiffness_entry
+from .transfer import add_block, row_length, stiffness_entry
 
 
 @njit(cache=True)
@@ -156,7 +156,7 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
             w = V[q] * J[q]
             sv += V[q]
             sj += w
-            for a in range(nv):
+            for a in range(row_length(nodes, q)):       # the padding adds zeros
                 g = nodes[q, a]
                 u = 0
                 while u < nu and U[u] != g:
@@ -179,7 +179,8 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                         for L in range(n):
                             v += A[p, r, Jx, K, L] * dF0[p, K, L]
                     Q[r, Jx] = v / n
-            for a in range(nv):
+            m = row_length(nodes, p)
+            for a in range(m):
                 i = nodes[p, a]
                 lo, hi = nodeptr[i], nodeptr[i + 1]
                 for r in range(d):
@@ -187,7 +188,7 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                     for Jx in range(d):
                         v += dN[p, a, Jx] * Q[r, Jx]
                     qa[r] = v if avg else 0.0
-                for b in range(nv):
+                for b in range(m):
                     for r in range(d):
                         for cc in range(d):
                             block[r, cc] = V[p] * s * (stiffness_entry(dN, A, p, a, b, r, cc, d)
