@@ -4,8 +4,9 @@ particle-quadrature stiffness into a CSR array.
 Shape data are padded arrays: nodes[p, a] (node index), N[p, a] (weight) and dN[p, a, :]
 (gradient). A wide family's rows differ in length: each lists its nodes once, then repeats
 the last one with N = dN = 0 (pad_row), and the passes stop at the padding (row_length), so
-a particle whose box touches 4 of the 9 columns costs 4. `D` is a tuple of length gdim: its length is a compile-time constant for numba,
-so the short loops over dimensions are unrolled (about 2x faster than a runtime d).
+a particle whose box touches 4 of the 9 columns costs 4. `D` is a tuple of length gdim: its
+length is a compile-time constant for numba, so the short loops over dimensions are
+unrolled (about 2x faster than a runtime d).
 Every grid integral is a particle sum with weight V_p (DESIGN.md):
   m_i = sum_p N_ip m_p,   (m v)_i = sum_p N_ip m_p v_p,
   f_i = sum_p N_ip m_p g - sum_p V_p sigma_p . grad N_ip      (seed 000 eq 2.22, no D: errata)
