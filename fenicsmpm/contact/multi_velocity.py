@@ -98,6 +98,7 @@ import numpy as np
 from numba import njit
 
 from ..kernels import transfer as kt
+from ..kernels.transfer import row_length
 from ..integrators.explicit import SCHEMES
 from ..kernels import axisymmetric as axi
 from .penalty import DAMPING as PENALTY_DAMPING, PenaltyContact, check_polyline
@@ -150,7 +151,7 @@ def p2g_bodies(D, nodes, N, dN, body, mass, v, m_b, mv_b, gm_b):
     for p in range(nodes.shape[0]):
         b = body[p]
         mp = mass[p]
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             i = nodes[p, a]
             w = N[p, a] * mp
             m_b[i, b] += w
@@ -170,7 +171,7 @@ def p2g_positions_bodies(D, nodes, N, body, mass, x, V, axis_r, xm_b, rm_b):
         b = body[p]
         vol = V[p] / x[p, 0] if axis_r else V[p]
         r = 0.5 * vol ** (1.0 / d)
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             i = nodes[p, a]
             w = N[p, a] * mass[p]
             rm_b[i, b] += w * r
@@ -190,7 +191,7 @@ def surface_extents(D, nodes, N, body, x, V, axis_r, node_x, ref_n, shared, lo_b
         b = body[p]
         vol = V[p] / x[p, 0] if axis_r else V[p]
         r = 0.5 * vol ** (1.0 / d)
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             i = nodes[p, a]
             if N[p, a] <= 0.0 or not shared[i]:
                 continue
@@ -245,7 +246,7 @@ def p2g_weighted_bodies(D, nodes, N, body, mass, q, out):
     d = len(D)
     for p in range(nodes.shape[0]):
         b = body[p]
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             w = N[p, a] * mass[p]
             i = nodes[p, a]
             for k in range(d):
@@ -258,7 +259,7 @@ def internal_force_bodies(D, nodes, dN, body, V, stress, out):
     d = len(D)
     for p in range(nodes.shape[0]):
         b = body[p]
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             i = nodes[p, a]
             for k in range(d):
                 s = 0.0
@@ -439,7 +440,7 @@ def g2p_bodies(D, nodes, N, body, rigid, v_rigid, dt, v_old, v_new, flip, x, v, 
             dx = 0.0
             dv = 0.0
             vp = 0.0
-            for a in range(nodes.shape[1]):
+            for a in range(row_length(nodes, p)):
                 i = nodes[p, a]
                 w = N[p, a]
                 dx += w * dt * v_new[i, b, k]
@@ -461,7 +462,7 @@ def incremental_F_bodies(D, nodes, dN, body, rigid, w, scale, dF_out):
         b = body[p]
         if rigid[b]:
             continue
-        for a in range(nodes.shape[1]):
+        for a in range(row_length(nodes, p)):
             n = nodes[p, a]
             for i in range(d):
                 wi = scale * w[n, b, i]
