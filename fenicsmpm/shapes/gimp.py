@@ -93,13 +93,12 @@ def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
     derivatives of the ns lattice nodes looked at per axis; off (d, ns): their flat lattice
     offsets (-1: outside the local lattice). Node (a, b, c) has the weight Sx_a Sy_b Sz_c and
     the gradient (dSx_a Sy_b Sz_c, dSy_b Sx_a Sz_c, dSz_c Sx_a Sy_b) (missing axes: factor 1),
-    in nested loops, axis 0 fastest. A node of weight 0 is skipped (the first one seen pads
-    a row that has no other node),
-    unless `keep_gradients` and one of its gradient components is not 0 (a node whose 1D
-    weight vanishes at the particle with a nonzero slope, e.g. the boundary-modified B-spline
-    at the grid boundary). Nonzero-weight nodes first (count_out[p] of them, only the first
-    nodes_out.shape[1] written), then padding (kernels.transfer.pad_row). Returns True when a node of nonzero
-    weight is not a local node."""
+    in nested loops, axis 0 fastest. A node of weight 0 is skipped, unless `keep_gradients`
+    and one of its gradient components is not 0 (a node whose 1D weight vanishes at the
+    particle with a nonzero slope, e.g. the boundary-modified B-spline at the grid boundary).
+    Nonzero-weight nodes first (count_out[p] of them, only the first nodes_out.shape[1]
+    written), then padding (kernels.transfer.pad_row; the first skipped node pads a row that
+    has no other). Returns True when a node of nonzero weight is not a local node."""
     nv = nodes_out.shape[1]
     bad = False
     cnt = 0
