@@ -197,3 +197,30 @@ def test_combine_into_fewer_columns_than_the_corners_reach():
     assert np.array_equal(few[3][~over], full[3][~over])
     for a, b in zip(few[:3], full[:3]):
         assert np.array_equal(a[~over], b[~over, :nv - 2])
+
+
+@pytest.mark.parametrize("distorted", [False, True], ids=["structured", "distorted"])
+def test_corners_searched_from_last_steps_cells(distorted):
+    """CpdiShape starts each corner's search at the cell it was in last step (shapes.cpdi.
+    shape_at_points' point_cells): after steps of a rotating body on triangles (corners
+    crossing cells), the weights equal those from a search started at the particles' own
+    cells (1e-13), and the remembered cells are where the corners are."""
+    grid, pts, sim = make(CT.triangle, "cpdi2", distorted)
+    pts.v[:] = 2.0 * np.c_[-(pts.x[:, 1] - 0.5), pts.x[:, 0] - 0.75]
+    sim.dt = 2e-3
+    for _ in range(10):
+        sim.step()
+    shape = sim._wide
+    assert shape._corner_key == (pts.version, len(pts))
+    ncor = pts.cpdi_corners.shape[1]
+    remembered = shape._corner_cells.reshape(-1, ncor)
+    moved = MPI.COMM_WORLD.allreduce(int(np.sum(remembered != pts.cell[:, None])))
+    assert moved > 0, "no corner outside its particle's cell: the test checks nothing"
+    nodes, N, dN = (a.copy() for a in shape.evaluate(sim))
+    shape._corner_key = None                    # forget: search from the particles' cells
+    fresh = shape.evaluate(sim)
+    for a, b in zip((nodes, N, dN), fresh):
+        assert a.shape == b.shape
+    assert np.array_equal(nodes, fresh[0])
+    assert np.abs(N - fresh[1]).max(initial=0.0) < 1e-13
+    assert np.abs(dN - fresh[2]).max(initial=0.0) < 1e-13 * np.abs(dN).max(initial=1.0)

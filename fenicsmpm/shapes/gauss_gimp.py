@@ -106,7 +106,7 @@ class GaussGimpShape:
         n, nvc = len(p), g.cell_nodes.shape[1]
         pts = np.empty((n, N_GAUSS, 2))
         gauss_points(p.x, p.F, p.cpdi_r0, pts)
-        gnodes, gN, gdN = shape_at_points(g, pts, p.cell)
+        gnodes, gN, gdN, _ = shape_at_points(g, pts, p.cell)
         width = N_GAUSS * nvc
         nodes = np.empty((n, width), dtype=np.int32)
         N = np.empty((n, width))

