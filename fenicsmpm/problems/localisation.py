@@ -84,8 +84,8 @@ def shear_layer(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006, 
     particles per cell): bottom fixed, the top moved by u(t) = u_end t in x over t in [0, 1]
     (`steps` quasi-static steps, displacement control), u_y = 0 everywhere, so the solution
     is 1D, tau(y) = tau.  Imperfection: the particles within 0.01 m of mid-height start with
-    eps_p = `weak`.  Returns u (top displacement), tau (mean sigma_xy), the final eps_p
-    profile (y, eps_p), the band width w (module docstring, L = width), Newton iterations,
+    eps_p = `weak`.  Returns u (top displacement), tau (mean sigma_xy), the largest final
+    eps_p, the band width w (module docstring, L = width), Newton iterations,
     completed/stop message, time split (step wall, nonlocal), ids, state, stress and initial
     positions x0 of the local particles."""
     sim = shear_layer_simulation(h, length, comm, height, width, u_end, steps, m, weak, material)
@@ -104,11 +104,8 @@ def shear_layer(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006, 
     eps = p.state[:, 0]
     emax = _gmax(comm, float(eps.max()) if len(p) else 0.0)
     band = _gsum(comm, float(np.sum(p.V * eps))) / (width * emax) if emax > 0 else 0.0
-    prof = comm.gather((p.x[:, 1].copy(), eps.copy()), root=0)
-    y = np.concatenate([a for a, _ in prof]) if comm.rank == 0 else None
-    e = np.concatenate([b for _, b in prof]) if comm.rank == 0 else None
     return dict(h=h, length=length, u=np.array(u), tau=np.array(tau), completed=done,
-                stopped=msg, band_width=band, eps_max=emax, y=y, eps=e,
+                stopped=msg, band_width=band, eps_max=emax,
                 newton=list(qs.iterations), wall_s=wall,
                 nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
                 n_particles=_gsum(comm, len(p)), ids=p.id.copy(), state=p.state.copy(),
