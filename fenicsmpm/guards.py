@@ -217,6 +217,34 @@ def check_wave_speed(sim):
                           f"dt / cfl", RuntimeWarning, stacklevel=4)
 
 
+def _leaving_cause(sim):
+    """What the particles that left (cell -1) say about why (collective): their largest
+    speed, stress and det F against the fastest deformable material's P-wave speed c_p of
+    the current state (state_wave_speed). A particle faster than c_p was thrown out by a
+    blow-up that began earlier (issue 21: stress spikes in particles stretched far and
+    squeezed again reached about 60x lithostatic before particles left at 274 m/s); a slower
+    one flowed out of a mesh too small for the motion."""
+    from mpi4py import MPI
+    p = sim.particles
+    gone = np.flatnonzero(p.cell < 0)
+    v = float(np.linalg.norm(p.v[gone], axis=1).max()) if len(gone) else 0.0
+    s = float(np.abs(p.stress[gone]).max()) if len(gone) else 0.0
+    J = np.array([det3(p.F[i]) for i in gone[:1000]])
+    jmax = float(J.max()) if len(J) else 0.0
+    if sim.comm.size > 1:
+        v, s, jmax = (sim.comm.allreduce(q, op=MPI.MAX) for q in (v, s, jmax))
+    c = state_wave_speed(sim) if sim._wave_materials else 0.0
+    msg = (f"; their largest speed {v:.4g} m/s, |stress| {s:.4g} Pa, det F {jmax:.4g} "
+           f"(P-wave speed of the material's state c_p = {c:.4g} m/s)")
+    if c > 0.0 and v > c:
+        return msg + (". Faster than c_p: unless the material was launched that fast, a "
+                      "blow-up threw them out. Likely causes: a stress spike in particles whose "
+                      "volume grew far (det F >> 1) and was compacted again; a load or contact "
+                      "that outgrew dt; too large a dt (lower cfl)")
+    return msg + (". The material flowed out of the mesh: extend the mesh, or pass "
+                  "on_leave='remove' to drop such particles")
+
+
 def particles_left(sim, ids, xs):
     """Apply sim.on_leave (Simulation) to the particles in no cell of the mesh (cell == -1; `ids`
     and `xs` list them globally, the same on every rank)."""
@@ -231,10 +259,8 @@ def particles_left(sim, ids, xs):
             return
     where = (f"step {sim.step_count}, t = {sim.t:.6g}: {len(ids)} particle(s) left the mesh, "
              f"ids {ids[:5].tolist()} at {np.round(xs[:5], 6).tolist()}")
-    if sim.on_leave == "periodic":
-        raise ParticlesLeftMesh(where)
-    if sim.on_leave == "error":
-        raise ParticlesLeftMesh(where)
+    if sim.on_leave in ("periodic", "error"):
+        raise ParticlesLeftMesh(where + _leaving_cause(sim))
     p = sim.particles
     gone = p.cell < 0
     mass = p.mass[gone].sum()

@@ -123,8 +123,26 @@ def test_particles_leaving_raise_the_exported_exception():
     p = fm.Particles.fill(grid, mat, per_cell=2, region=lambda x: x[:, 0] > 0.75,
                           velocity=(20.0, 0.0))
     sim = fm.Simulation(grid, p, fm.Explicit(), dt=0.005)
-    with pytest.raises(fm.ParticlesLeftMesh, match=r"step 1, t = 0.005: 8 particle\(s\) left the mesh, ids \[.*\] at \[\[1.0375, "):
+    with pytest.raises(fm.ParticlesLeftMesh, match=r"step 1, t = 0.005: 8 particle\(s\) left the mesh, ids \[.*\] at \[\[1.0375, ") as e:
         sim.run(steps=3)
+    c = mat.p_wave_speed                        # 34.6 m/s: the block flowed out
+    assert f"their largest speed 20 m/s, |stress| " in str(e.value)
+    assert (f"(P-wave speed of the material's state c_p = {c:.4g} m/s). The material flowed "
+            f"out of the mesh: extend the mesh, or pass on_leave='remove'") in str(e.value)
+
+
+def test_particles_leaving_faster_than_the_wave_speed_are_named_a_blow_up():
+    """Particles leaving faster than the material's P-wave speed were thrown out (issue 21:
+    the guards name the blow-up, not only the particles that left)."""
+    grid, mat = block()
+    c = mat.p_wave_speed
+    p = fm.Particles.fill(grid, mat, per_cell=2, region=lambda x: x[:, 0] > 0.75,
+                          velocity=(2.0 * c, 0.0))
+    sim = fm.Simulation(grid, p, fm.Explicit(), dt=0.001)
+    with pytest.raises(fm.ParticlesLeftMesh, match=rf"their largest speed {2 * c:.4g} m/s.*"
+                                                   r"Faster than c_p: unless the material was "
+                                                   r"launched that fast, a blow-up threw them"):
+        sim.run(steps=10)
 
 
 def test_probe_outside_the_mesh_raises():
