@@ -162,8 +162,10 @@ class Grid:
     def locate(self, x, cells=None):
         """Cell and reference coordinates of points x (n, gdim).
 
-        `cells` (optional) holds each point's previous cell: on unstructured meshes only the
-        points that left it are searched again. Points in no local cell get cell -1.
+        `cells` (optional) holds each point's previous cell: on unstructured meshes and on
+        structured triangle/tetrahedron grids (a box holds several simplices) only the points
+        that left it are searched again; structured quadrilaterals/hexahedra locate by
+        arithmetic alone. Points in no local cell get cell -1.
         Returns (cells int32, xi float64)."""
         x = np.ascontiguousarray(x, dtype=np.float64)
         n = x.shape[0]
@@ -172,7 +174,7 @@ class Grid:
         if n == 0:
             return out, xi
         s = self._structured
-        if s is not None:
+        if s is not None and (cells is None or self.kind != ks.SIMPLEX):
             ks.locate_structured(self.D, self.kind, x, s["origin"], s["spacing"], s["nbox"], s["table"],
                                  self.cell_nodes, self.node_x, self.affine_Jinv, out, xi)
             return out, xi
@@ -183,7 +185,7 @@ class Grid:
                          xi, inside)
         lost = np.flatnonzero(~inside)
         if len(lost):
-            found, xl = self._tree_locate(x[lost])
+            found, xl = self.locate(x[lost]) if s is not None else self._tree_locate(x[lost])
             out[lost] = found
             xi[lost] = xl
         return out, xi

@@ -567,7 +567,7 @@ class CpdiShape(PaddedStencil):
         key = (p.version, n)
         hint = self._corner_cells if self._corner_key == key else None
         cnodes, cN, _, self._corner_cells = shape_at_points(g, corners, p.cell, hint,
-                                                            self._corner_buffers)
+                                                            self._corner_buffers, False)
         self._corner_key = key
         cnodes = cnodes.reshape(n, ncor, nvc)
         cN = cN.reshape(n, ncor, nvc)
@@ -590,7 +590,7 @@ class CpdiShape(PaddedStencil):
         return self._fill(n, d, ncor * nvc, combine)[0]
 
 
-def shape_at_points(g, points, cells_hint, point_cells=None, buffers=None):
+def shape_at_points(g, points, cells_hint, point_cells=None, buffers=None, gradients=True):
     """Standard-MPM (nodes, N, dN, cells) at points (n, k, gdim) of n particles, flattened to
     n k rows, with each point's cell (n k,; -1 where it is in no local cell). A point outside
     the local mesh uses its particle's cell (`cells_hint`), extended linearly. The search
@@ -599,7 +599,8 @@ def shape_at_points(g, points, cells_hint, point_cells=None, buffers=None):
     that left it are searched again; about 58 % of the corners of triangular CPDI2 domains lie
     outside their particle's cell) or, without it, at the particle's cell. `buffers`: a dict
     the caller keeps between calls, holding the output arrays (no fresh allocation of the n k
-    rows per step, whose first touch costs as much as filling them)."""
+    rows per step, whose first touch costs as much as filling them). gradients=False: dN is
+    None (CPDI needs the corner values only)."""
     from . import standard as ks
     n, k, d = points.shape
     nvc = g.cell_nodes.shape[1]
@@ -616,12 +617,15 @@ def shape_at_points(g, points, cells_hint, point_cells=None, buffers=None):
                      g.node_x, g.affine_Jinv, xl, np.empty(len(lost), dtype=np.bool_))
         xi[lost] = xl
     buf = {} if buffers is None else buffers
-    if buf.get("shape") != (n * k, nvc, d):
-        buf.update(shape=(n * k, nvc, d), nodes=np.empty((n * k, nvc), dtype=np.int32),
-                   N=np.empty((n * k, nvc)), dN=np.empty((n * k, nvc, d)))
+    if buf.get("shape") != (n * k, nvc, d, gradients):
+        buf.update(shape=(n * k, nvc, d, gradients), nodes=np.empty((n * k, nvc), dtype=np.int32),
+                   N=np.empty((n * k, nvc)), dN=np.empty((n * k, nvc, d)) if gradients else None)
     nodes, N, dN = buf["nodes"], buf["N"], buf["dN"]
-    ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad, g.affine_Jinv,
-                 nodes, N, dN)
+    if gradients:
+        ks.mpm_shape(g.D, g.kind, cells, xi, g.cell_nodes, g.node_x, g.simplex_grad,
+                     g.affine_Jinv, nodes, N, dN)
+    else:
+        ks.mpm_values(g.D, g.kind, cells, xi, g.cell_nodes, nodes, N)
     return nodes, N, dN, found
 
 

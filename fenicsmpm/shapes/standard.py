@@ -325,6 +325,41 @@ def mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
 
 
 @njit(cache=True)
+def _mpm_values(D, kind, cells, xi, cell_nodes, nodes_out, N_out, lo, hi):
+    d = len(D)
+    nv = cell_nodes.shape[1]
+    Nq = np.empty(nv)
+    dNq = np.empty((nv, d))
+    for p in range(lo, hi):
+        c = cells[p]
+        for a in range(nv):
+            nodes_out[p, a] = cell_nodes[c, a]
+        if kind == SIMPLEX:
+            s = 0.0
+            for k in range(d):
+                N_out[p, k + 1] = xi[p, k]
+                s += xi[p, k]
+            N_out[p, 0] = 1.0 - s
+            continue
+        _q1_basis(xi[p], d, Nq, dNq)
+        for a in range(nv):
+            N_out[p, a] = Nq[a]
+
+
+@njit(parallel=PRANGE, cache=True)
+def mpm_values(D, kind, cells, xi, cell_nodes, nodes_out, N_out):
+    """mpm_shape without the gradients: nodes_out[p, a] and N_out[p, a] = N_a(x_p) only (the
+    corner values CPDI combines, shapes.cpdi.shape_at_points(gradients=False))."""
+    n = cells.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _mpm_values(D, kind, cells, xi, cell_nodes, nodes_out, N_out, np.int64(0), n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _mpm_values(D, kind, cells, xi, cell_nodes, nodes_out, N_out, lo, hi)
+
+
+@njit(cache=True)
 def reference_points_to_physical(kind, cells, xi, cell_nodes, node_x, x_out, detJ_out):
     """Map reference points to physical space; also return |det J| there (for volumes)."""
     d = xi.shape[1]
