@@ -257,6 +257,25 @@ def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, 
                            affine_Jinv, cells_out, xi_out, lo, hi)
 
 
+@njit(cache=True, inline="always")
+def _values(kind, d, c, xi, p, cell_nodes, Nq, dNq, nodes_out, N_out):
+    """Point p's cell nodes and basis values N_a(xi_p) in row p (P1: 1 - sum xi, xi_k; Q1:
+    _q1_basis, whose reference gradients stay in dNq for the caller)."""
+    nv = cell_nodes.shape[1]
+    for a in range(nv):
+        nodes_out[p, a] = cell_nodes[c, a]
+    if kind == SIMPLEX:
+        s = 0.0
+        for k in range(d):
+            N_out[p, k + 1] = xi[p, k]
+            s += xi[p, k]
+        N_out[p, 0] = 1.0 - s
+        return
+    _q1_basis(xi[p], d, Nq, dNq)
+    for a in range(nv):
+        N_out[p, a] = Nq[a]
+
+
 @njit(cache=True)
 def _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv,
                nodes_out, N_out, dN_out, lo, hi):
@@ -268,19 +287,12 @@ def _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv
     Jinv = np.empty((d, d))
     for p in range(lo, hi):
         c = cells[p]
-        for a in range(nv):
-            nodes_out[p, a] = cell_nodes[c, a]
+        _values(kind, d, c, xi, p, cell_nodes, Nq, dNq, nodes_out, N_out)
         if kind == SIMPLEX:
-            s = 0.0
-            for k in range(d):
-                N_out[p, k + 1] = xi[p, k]
-                s += xi[p, k]
-            N_out[p, 0] = 1.0 - s
             for a in range(nv):
                 for k in range(d):
                     dN_out[p, a, k] = simplex_grad[c, a, k]
             continue
-        _q1_basis(xi[p], len(D), Nq, dNq)
         if affine_Jinv.shape[0] > 0:
             for i in range(d):
                 for j in range(d):
@@ -296,7 +308,6 @@ def _mpm_shape(D, kind, cells, xi, cell_nodes, node_x, simplex_grad, affine_Jinv
                         J[i, j] += node_x[na, i] * dNq[a, j]
             _inv_small(J, d, Jinv)
         for a in range(nv):
-            N_out[p, a] = Nq[a]
             for k in range(d):
                 s = 0.0
                 for j in range(d):
@@ -331,19 +342,7 @@ def _mpm_values(D, kind, cells, xi, cell_nodes, nodes_out, N_out, lo, hi):
     Nq = np.empty(nv)
     dNq = np.empty((nv, d))
     for p in range(lo, hi):
-        c = cells[p]
-        for a in range(nv):
-            nodes_out[p, a] = cell_nodes[c, a]
-        if kind == SIMPLEX:
-            s = 0.0
-            for k in range(d):
-                N_out[p, k + 1] = xi[p, k]
-                s += xi[p, k]
-            N_out[p, 0] = 1.0 - s
-            continue
-        _q1_basis(xi[p], d, Nq, dNq)
-        for a in range(nv):
-            N_out[p, a] = Nq[a]
+        _values(kind, d, cells[p], xi, p, cell_nodes, Nq, dNq, nodes_out, N_out)
 
 
 @njit(parallel=PRANGE, cache=True)
