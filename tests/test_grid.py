@@ -103,3 +103,31 @@ def test_fill_volume_and_mass(comm, distort, ct, per_cell, distorted):
     assert p.n_global() == n_cells * per_cell ** d, (
         f"{p.n_global()} particles, expected {n_cells} cells x {per_cell}^{d}")
     assert np.all(p.V > 0) and misplaced == 0, f"{misplaced} particles not located in their cell"
+
+
+@pytest.mark.parametrize("ct", [CT.triangle, CT.tetrahedron], ids=lambda c: c.name)
+def test_structured_simplex_locate_starts_at_the_hint(comm, ct):
+    """On a structured simplex grid Grid.locate tries each point's hinted cell first, then
+    the box search: with right, wrong and missing hints every point is found in a cell that
+    holds it (its reference coordinates map back to it, 1e-12), the same cell as without a
+    hint except on shared faces, and points outside the local mesh get -1."""
+    msh = _rect(comm, ct, n=(6, 4)) if ct == CT.triangle else _box(comm, ct)
+    grid = fm.Grid(msh)
+    assert grid.structured
+    rng = np.random.default_rng(3)
+    d = grid.gdim
+    hi = np.array([1.5, 1.0, 1.0][:d])
+    x = np.vstack([rng.random((400, d)) * hi, hi + 0.1])     # the last point is outside
+    plain, _ = grid.locate(x)
+    nc = len(grid.cell_nodes)
+    hints = np.where(rng.random(len(x)) < 0.5, plain, rng.integers(-1, nc, len(x))).astype(np.int32)
+    cells, xi = grid.locate(x, hints)
+    assert np.array_equal(cells < 0, plain < 0)
+    assert cells[-1] == -1 or comm.size > 1
+    ok = cells >= 0
+    X = grid.node_x[grid.cell_nodes[cells[ok]]][:, :, :d]              # (m, d + 1, d)
+    back = X[:, 0] + np.einsum("mkd,mk->md", X[:, 1:] - X[:, :1], xi[ok])
+    assert np.abs(back - x[ok]).max() < 1e-12
+    assert np.all(xi[ok] >= -1e-9) and np.all(xi[ok].sum(axis=1) <= 1 + 1e-9)
+    same = np.mean(cells[ok] == plain[ok])
+    assert same > 0.95, f"only {same:.1%} of the points found in the unhinted cell"
