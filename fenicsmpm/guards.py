@@ -14,11 +14,12 @@ from .materials.piola import det3
 
 
 FIELD_NAMES = ("position", "velocity", "stress", "deformation gradient")
+SPEED_CELLS = 2.0   # a particle moving more than this many cells per step stops the run (code 8)
 
 
 @njit(cache=True)
-def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, material_id,
-                stretch, lo, hi):
+def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, v_lim2, bad_out,
+                material_id, stretch, lo, hi):
     n_bad = 0
     d = x.shape[1]
     for p in range(lo, hi):
@@ -59,6 +60,12 @@ def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, m
                 s += a[p, k] * a[p, k]
             if s > a_lim2:
                 code = 7
+            else:
+                s = 0.0
+                for k in range(d):
+                    s += v[p, k] * v[p, k]
+                if s > v_lim2:
+                    code = 8
         bad_out[p] = code
         if code:
             n_bad += 1
@@ -66,10 +73,13 @@ def _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, m
 
 
 @njit(parallel=PRANGE, cache=True)
-def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, material_id, stretch):
+def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, v_lim2, bad_out, material_id,
+          stretch):
     """bad_out[p] = 0 (fine), 1..4 (non-finite field, see FIELD_NAMES), 5 (det F <= 0, or an
     increment the commit refused: `inverted`), 6 (volume below vol_tol V0), 7 (|a|^2 > a_lim2:
-    a velocity jump of more than a cell per step in one step, the start of a blow-up). An
+    a velocity jump of more than a cell per step in one step, the start of a blow-up), 8
+    (|v|^2 > v_lim2: a particle moving more than SPEED_CELLS cells per step, which no stable
+    explicit run reaches: a blow-up that grew over several steps). An
     inversion is
     reported first: it is the cause of any non-finite value that follows it. Returns the
     number of bad particles (threaded over particle chunks, kernels.threads). In the same pass
@@ -78,14 +88,14 @@ def _scan(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out, materia
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out,
+        return _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, v_lim2, bad_out,
                            material_id, stretch, np.int64(0), n)
     bad = np.zeros(nc, dtype=np.int64)
     part = np.ones((nc, stretch.shape[0]))
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        bad[c] = _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, bad_out,
-                             material_id, part[c], lo, hi)
+        bad[c] = _scan_range(x, v, a, stress, F, V, V0, inverted, vol_tol, a_lim2, v_lim2,
+                             bad_out, material_id, part[c], lo, hi)
     for c in range(nc):
         for k in range(stretch.shape[0]):
             stretch[k] = max(stretch[k], part[c, k])
@@ -96,16 +106,18 @@ def check_particles(sim, vol_tol=1e-6):
     """Raise FloatingPointError (non-finite state) or RuntimeError (inverted or collapsed
     particles, or a blow-up: a particle of an explicit run whose velocity changed by more than
     h / dt in one step, |a_p| dt > h / dt, a kick that would move it a further cell per step;
-    smooth motion, impacts and free fall change a particle's velocity by a fraction of that)
-    naming step, time, field and the first offending particles; for a blow-up also their
+    smooth motion, impacts and free fall change a particle's velocity by a fraction of that;
+    or a particle faster than SPEED_CELLS h / dt, moving more than two cells per step, where a
+    blow-up that grew over many steps has taken it) naming step, time, field and the first offending particles; for a blow-up also their
     speed, velocity jump, stress and volume ratio det F, and the likely causes. The same pass
     keeps the per-material stretch of the state for material_wave_speeds."""
     p = sim.particles
     bad = np.empty(len(p), dtype=np.int8)
     a_lim = sim.grid.h / sim.dt ** 2 if sim.integrator.explicit else np.inf
     J = np.ones(len(p.materials))
+    v_lim = SPEED_CELLS * a_lim * sim.dt
     n_bad = _scan(p.x, p.v, p.a, p.stress, p.F, p.V, p.V0, sim._inverted, vol_tol, a_lim * a_lim,
-                  bad, p.material_id, J)
+                  v_lim * v_lim, bad, p.material_id, J)
     sim._stretch = (_state_key(sim), J)
     sim._inverted[:] = 0
     if sim.comm.size > 1:
@@ -125,10 +137,13 @@ def check_particles(sim, vol_tol=1e-6):
             "inverted particle (det F <= 0)" if code == 5 else
             f"collapsed particle volume (V < {vol_tol:g} V0)" if code == 6 else
             f"blow-up: particle velocity jumped by more than h / dt = {sim.grid.h / sim.dt:.4g} "
-            f"m/s in one step")
+            f"m/s in one step" if code == 7 else
+            f"blow-up: particle speed above {SPEED_CELLS:g} h / dt = "
+            f"{SPEED_CELLS * sim.grid.h / sim.dt:.4g} m/s (more than {SPEED_CELLS:g} cells per "
+            f"step)")
     msg = (f"step {sim.step_count}, t = {sim.t:.6g}: {what} in {n_bad} particle(s); first ids "
            f"{[r[0] for r in first]} at {[r[1] for r in first]}")
-    if code == 7:
+    if code >= 7:
         msg += (f"; their velocity jump {[float(f'{r[6]:.4g}') for r in first]} m/s, |v| "
                 f"{[float(f'{r[3]:.4g}') for r in first]} m/s, max |stress| "
                 f"{[float(f'{r[4]:.4g}') for r in first]} Pa, det F "
@@ -153,7 +168,7 @@ def _stretch(sim):
         return kept[1]
     p = sim.particles
     J = np.ones(len(p.materials))
-    _scan(p.x, p.v, p.a, p.stress, p.F, p.V, p.V0, sim._inverted[:0], 0.0, np.inf,
+    _scan(p.x, p.v, p.a, p.stress, p.F, p.V, p.V0, sim._inverted[:0], 0.0, np.inf, np.inf,
           np.empty(len(p), dtype=np.int8), p.material_id, J)
     return J
 

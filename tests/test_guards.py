@@ -52,3 +52,23 @@ def test_blow_up_is_stopped_at_its_start_with_speed_stress_and_volume():
                                            r"than h / dt = .* in 1 particle\(s\); first ids \[5\]"
                                            r".*their velocity jump \[\d.*det F \[\d.*Likely causes"):
         check_particles(sim)
+
+
+def test_a_blow_up_grown_over_many_steps_stops_at_a_cell_per_step():
+    """Issue 21 item 4: a particle accelerated a little every step (no single jump above h /
+    dt) is stopped once it moves faster than 2 h / dt, more than two cells per step, with its
+    speed, stress and det F, instead of being thrown out of the mesh later."""
+    sim, _ = colliding_discs(fm.Explicit("MUSL"))
+    sim.run(steps=2)
+    p = sim.particles
+    hit = np.flatnonzero(p.id == 5)
+    v_lim = 2.0 * sim.grid.h / sim.dt
+    p.v[hit] = [1.01 * v_lim, 0.0]                 # reached over many steps: a = 0 this step
+    p.a[hit] = 0.0
+    from fenicsmpm.guards import check_particles
+    with pytest.raises(RuntimeError, match=r"step 2, .*blow-up: particle speed above 2 h / dt = "
+                                           r".* \(more than 2 cells per step\) in 1 particle\(s\); "
+                                           r"first ids \[5\].*\|v\| \[\d.*Likely causes"):
+        check_particles(sim)
+    p.v[hit] = [0.99 * v_lim, 0.0]
+    check_particles(sim)                           # just below: no stop
