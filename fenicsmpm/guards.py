@@ -108,9 +108,10 @@ def check_particles(sim, vol_tol=1e-6):
     h / dt in one step, |a_p| dt > h / dt, a kick that would move it a further cell per step;
     smooth motion, impacts and free fall change a particle's velocity by a fraction of that;
     or a particle faster than SPEED_CELLS h / dt, moving more than two cells per step, where a
-    blow-up that grew over many steps has taken it) naming step, time, field and the first offending particles; for a blow-up also their
-    speed, velocity jump, stress and volume ratio det F, and the likely causes. The same pass
-    keeps the per-material stretch of the state for material_wave_speeds."""
+    blow-up that grew over many steps has taken it) naming step, time, field and the first
+    offending particles; for a blow-up also their speed, velocity jump, stress and volume
+    ratio det F, and the likely causes. The same pass keeps the per-material stretch of the
+    state for material_wave_speeds."""
     p = sim.particles
     bad = np.empty(len(p), dtype=np.int8)
     a_lim = sim.grid.h / sim.dt ** 2 if sim.integrator.explicit else np.inf
