@@ -54,7 +54,7 @@ def test_blow_up_is_stopped_at_its_start_with_speed_stress_and_volume():
         check_particles(sim)
 
 
-def test_a_blow_up_grown_over_many_steps_stops_at_a_cell_per_step():
+def test_a_blow_up_grown_over_many_steps_stops_at_two_cells_per_step():
     """Issue 21 item 4: a particle accelerated a little every step (no single jump above h /
     dt) is stopped once it moves faster than 2 h / dt, more than two cells per step, with its
     speed, stress and det F, instead of being thrown out of the mesh later."""
