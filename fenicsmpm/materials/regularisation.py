@@ -52,9 +52,9 @@ checkpoint (the average travels as a state column) repeats it exactly.
 Neighbour search: the points are binned into a uniform lattice of cell size h (the grid's
 smallest cell size) anchored at the mesh's lower corner, so on structured grids the bins are
 the grid's cells; a point scans the bins that meet the disc (sphere) of radius 3 l around it
-(row by row: about pi/4 (pi/6) of the square (cube) of ceil(3 l / h) rings, the same pairs
-in the same order, so the same bits), O(n k) for k neighbours, and gets <kappa> = 0 when no
-point with kappa != 0 lies in those bins. The
+(row by row: about pi/4 (pi/6) of the square (cube) of ceil(3 l / h) rings), reading the
+points from copies sorted by bin, so the bins of one row are one contiguous run; O(n k) for
+k neighbours; it gets <kappa> = 0 when no point with kappa != 0 lies in those bins. The
 points are averaged in parallel chunks of RETURN_CHUNK (kernels.threads), the same bits on
 any number of threads.  Under
 MPI every rank receives the particles of the other ranks within 3 l of its particles'
@@ -91,8 +91,9 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
     threads)."""
     nb, start, order, hot = _bins(x, kap, origin, hb)
     nc = particle_chunks(n_own, RETURN_CHUNK)
-    _average(x, vol, kap, n_own, nb, start, order, hot, (CUTOFF * length) ** 2,
-             1.0 / (length * length), int(math.ceil(CUTOFF * length / hb)), nc,
+    _average(x, kap, x[order], vol[order], kap[order], n_own, nb, start, hot,
+             (CUTOFF * length) ** 2, 1.0 / (length * length),
+             int(math.ceil(CUTOFF * length / hb)), nc,
              np.ascontiguousarray(origin, dtype=np.float64), float(hb), out)
 
 
@@ -127,16 +128,17 @@ def _bins(x, kap, origin, hb):
 
 
 @numba.njit(cache=True, parallel=PRANGE)
-def _average(x, vol, kap, n_own, nb, start, order, hot, rad2, il2, nr, nc, origin, hb, out):
-    """The averages of nonlocal_average, chunk c of nc on a thread each."""
+def _average(x, kap, xs, vs, ks, n_own, nb, start, hot, rad2, il2, nr, nc, origin, hb, out):
+    """The averages of nonlocal_average, chunk c of nc on a thread each; xs, vs, ks: the
+    points' positions, volumes and kappa sorted by bin (contiguous reads)."""
     d = x.shape[1]
-    room = (2 * nr + 3) ** d
+    room = (2 * nr + 3) ** (d - 1)
     for c in numba.prange(nc):
         lo, hi = chunk(n_own, nc, c)
-        cells = np.empty(room, dtype=np.int64)
+        rows = np.empty((room, 2), dtype=np.int64)
         for p in range(lo, hi):
-            k = _near_bins(x, p, origin, hb, rad2, nb, cells)
-            out[p] = _average_one(p, x, vol, kap, start, order, hot, rad2, il2, cells, k)
+            k = _near_rows(x, p, origin, hb, rad2, nb, rows)
+            out[p] = _average_one(x[p], kap[p], xs, vs, ks, start, hot, rad2, il2, rows, k)
 
 
 @numba.njit(cache=True)
@@ -162,10 +164,11 @@ def _gap2(xc, o, hb, c):
 
 
 @numba.njit(cache=True)
-def _near_bins(x, p, origin, hb, rad2, nb, cells):
-    """Writes to `cells` the bins that can hold a point within sqrt(rad2) of x_p, in the
-    order of their linear index, and returns their count: the rows of the disc (sphere)
-    only, not the square (cube) of bins around it, so about pi/4 (pi/6) of the bins."""
+def _near_rows(x, p, origin, hb, rad2, nb, rows):
+    """Writes to `rows` the bins that can hold a point within sqrt(rad2) of x_p as runs
+    [first, last] of consecutive linear indices (one per row of the last axis), in the order
+    of their linear index, and returns their count: the rows of the disc (sphere) only, not
+    the square (cube) of bins around it, so about pi/4 (pi/6) of the bins."""
     d = x.shape[1]
     k = 0
     lo0, hi0 = _span(x[p, 0], origin[0], hb, math.sqrt(rad2), nb[0])
@@ -173,45 +176,58 @@ def _near_bins(x, p, origin, hb, rad2, nb, cells):
         g0 = _gap2(x[p, 0], origin[0], hb, b0)
         if g0 >= rad2:
             continue
-        lo1, hi1 = _span(x[p, 1], origin[1], hb, math.sqrt(rad2 - g0), nb[1]) if d > 1 else (0, 1)
+        if d == 1:
+            rows[k, 0] = b0 * nb[1] * nb[2]
+            rows[k, 1] = rows[k, 0]
+            k += 1
+            continue
+        lo1, hi1 = _span(x[p, 1], origin[1], hb, math.sqrt(rad2 - g0), nb[1])
+        if d == 2:
+            if hi1 > lo1:
+                rows[k, 0] = b0 * nb[1] + lo1
+                rows[k, 1] = b0 * nb[1] + hi1 - 1
+                k += 1
+            continue
         for b1 in range(lo1, hi1):
-            g1 = g0 + (_gap2(x[p, 1], origin[1], hb, b1) if d > 1 else 0.0)
+            g1 = g0 + _gap2(x[p, 1], origin[1], hb, b1)
             if g1 >= rad2:
                 continue
-            lo2, hi2 = (_span(x[p, 2], origin[2], hb, math.sqrt(rad2 - g1), nb[2]) if d > 2
-                        else (0, 1))
-            for b2 in range(lo2, hi2):
-                cells[k] = (b0 * nb[1] + b1) * nb[2] + b2
+            lo2, hi2 = _span(x[p, 2], origin[2], hb, math.sqrt(rad2 - g1), nb[2])
+            if hi2 > lo2:
+                rows[k, 0] = (b0 * nb[1] + b1) * nb[2] + lo2
+                rows[k, 1] = (b0 * nb[1] + b1) * nb[2] + hi2 - 1
                 k += 1
     return k
 
 
 @numba.njit(cache=True)
-def _average_one(p, x, vol, kap, start, order, hot, rad2, il2, cells, k):
-    """<kap>_p of nonlocal_average over the points of cells[:k]: 0 when none of them has
-    kap != 0."""
-    d = x.shape[1]
+def _average_one(xp, kp, xs, vs, ks, start, hot, rad2, il2, rows, k):
+    """<kap>_p of nonlocal_average (xp = x_p, kp = kap_p: the result where no point has a
+    weight) over the sorted points of the bin runs
+    rows[:k] (a run's points are contiguous in xs): 0 when none of them has kap != 0."""
+    d = xs.shape[1]
     near = False
     for i in range(k):
-        if hot[cells[i]]:
-            near = True
+        for c in range(rows[i, 0], rows[i, 1] + 1):
+            if hot[c]:
+                near = True
+                break
+        if near:
             break
     if not near:
         return 0.0
     num = 0.0
     den = 0.0
     for i in range(k):
-        c = cells[i]
-        for jj in range(start[c], start[c + 1]):
-            q = order[jj]
+        for q in range(start[rows[i, 0]], start[rows[i, 1] + 1]):
             r2 = 0.0
             for j in range(d):
-                r2 += (x[p, j] - x[q, j]) ** 2
+                r2 += (xp[j] - xs[q, j]) ** 2
             if r2 < rad2:
-                w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vol[q]
-                num += w * kap[q]
+                w = math.sqrt(r2) * il2 * math.exp(-r2 * il2) * vs[q]
+                num += w * ks[q]
                 den += w
-    return num / den if den > 0.0 else kap[p]
+    return num / den if den > 0.0 else kp
 
 
 def _with_ghosts(comm, x, vol, kap, radius):
