@@ -189,6 +189,76 @@ class Particles:
         return p
 
     @classmethod
+    def fill_edges(cls, grid, material, region=None, velocity=None):
+        """One particle per edge of a triangle mesh, its domain the edge's diamond: the two
+        triangles (a, b, c_k) that join the edge (a, b) to the centroids c_k of the cells on
+        either side (one cell and the edge midpoint on the mesh boundary), so the domains
+        tile the body, 1.5 particles a cell. The particle sits at the diamond's centroid with
+        its area and carries its corners (a, c_1, b, c_2) as the quadrilateral CPDI2 domain
+        (field `cpdi_corners`; shapes.cpdi): a domain over two cells averages their P1
+        gradients, the edge-based smoothing of ES-FEM (Liu, Nguyen-Thoi & Lam 2009), whose
+        stress converges faster than the single cell's gradient of Particles.fill's
+        sub-triangles (V3 MMS, docs/guide/choosing.md). Use with shape="auto"/"cpdi2".
+
+        region(x) -> bool selects the material cells by their centroids (an edge between a
+        material cell and another gets the material side's half); velocity as in fill.
+        2D triangle meshes only (ValueError otherwise). Collective: gives the mesh the vertex
+        ghost layer (Grid.ensure_vertex_ring), so every rank sees both cells of the edges it
+        owns; each edge's particle goes to the rank owning its centroid's cell."""
+        _check_material(material)
+        if grid.gdim != 2 or grid.kind != ks.SIMPLEX or grid.axisymmetric:
+            raise ValueError("Particles.fill_edges: needs a plane 2D triangle mesh "
+                             "(CellType.triangle, not axisymmetric); use Particles.fill")
+        grid.ensure_vertex_ring()
+        topo = grid.mesh.topology
+        topo.create_entities(1)
+        topo.create_connectivity(2, 1)
+        nc = grid.n_cells
+        c2e = topo.connectivity(2, 1).array.reshape(-1, 3)[:nc]
+        X = grid.node_x[grid.cell_nodes][:, :, :2]                 # (nc, 3, 2)
+        cen = X.mean(axis=1)
+        mat_cell = np.ones(nc, dtype=bool)
+        if region is not None:
+            if not callable(region):
+                raise TypeError(f"Particles.fill_edges: 'region' must be a function region(x) "
+                                f"-> bool array, got {type(region).__name__}")
+            mat_cell = np.asarray(region(cen)).astype(bool)
+            if mat_cell.shape != (nc,):
+                raise ValueError(f"Particles.fill_edges: 'region(x)' must return one bool per "
+                                 f"point, shape ({nc},), got shape {mat_cell.shape}")
+        # the pieces (a, b, c) of every material cell, local edge i opposite vertex i
+        c_idx, i_idx = np.nonzero(np.broadcast_to(mat_cell[:, None], (nc, 3)))
+        edge = c2e[c_idx, i_idx]
+        keep = edge < topo.index_map(1).size_local                 # edges this rank owns
+        c_idx, i_idx, edge = c_idx[keep], i_idx[keep], edge[keep]
+        a = X[c_idx, (i_idx + 1) % 3]
+        b = X[c_idx, (i_idx + 2) % 3]
+        c = cen[c_idx]
+        area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
+                            - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
+        order = np.argsort(edge, kind="stable")
+        edge, a, b, c, area = edge[order], a[order], b[order], c[order], area[order]
+        first = np.flatnonzero(np.diff(edge, prepend=-1) != 0)       # an edge's first piece
+        two = np.diff(np.append(first, len(edge))) == 2
+        sec = np.where(two, first + 1, first)
+        A = area[first] + np.where(two, area[sec], 0.0)
+        x = (area[first, None] * (a[first] + b[first] + c[first])
+             + np.where(two, area[sec], 0.0)[:, None] * (a[sec] + b[sec] + c[sec])) / (3.0 * A[:, None])
+        corners = np.stack([a[first], c[first], b[first],
+                            np.where(two[:, None], c[sec], 0.5 * (a[first] + b[first]))], axis=1)
+        ccw = ((corners[:, 2, 0] - corners[:, 0, 0]) * (corners[:, 3, 1] - corners[:, 1, 1])
+               - (corners[:, 3, 0] - corners[:, 1, 0]) * (corners[:, 2, 1] - corners[:, 0, 1]))
+        corners[ccw < 0] = corners[ccw < 0][:, [0, 3, 2, 1]]
+        if grid.global_count(np.ones(len(x), bool)) == 0:
+            raise ValueError("Particles.fill_edges: the region selects no cell")
+        cells, xi = grid.locate(np.ascontiguousarray(x))
+        p = cls._create(grid, material, np.ascontiguousarray(x), A, cells, xi, velocity)
+        p.add_field("cpdi_corners", (4, 2))[:] = corners
+        p.send_to_owners()
+        p._number()
+        return p
+
+    @classmethod
     def _create(cls, grid, material, x, vol, cells, xi, velocity):
         """vol is the cell-measure share of each point; on an axisymmetric grid it is a
         meridian area and the volume per radian is r vol (fenicsmpm.kernels.axisymmetric)."""

@@ -489,6 +489,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             self._advance(dt / 2, cuts_left - 1)
             self._advance(dt / 2, cuts_left - 1)
             return
+        if self._wide is not None:
+            self._wide.after_step(self, dt)
         self.t += dt
 
     def follow_state_dt(self):

@@ -7,7 +7,8 @@ Unit square, neo-Hookean E = 1e7, nu = 0.3, rho0 = 1000, amplitude A = 0.05 (F11
 0.69 and 1.31), 2 x 2 particles per quadrilateral cell, run to the displacement peak
 t_end = 1 / (2 c). Series (integrator x shape family): explicit MUSL (dt = 0.2 h / c_p)
 with every shape family ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2"), the same on triangles
-(each square split in two) with the default shape="auto" (CPDI2 there) and "mpm", and
+(each square split in two) with the default shape="auto" (CPDI2 there) and "mpm", "auto"
+with the edge domains of Particles.fill_edges ("triangle edges": 1.5 particles a cell), and
 implicit Newmark (dt = h / c_p) with "mpm" and "cpgimp" (its shape="auto"). Cells per side
 n = 8, 16, 32, 64 (quick: 4, 6, 8, 12).
 
@@ -38,6 +39,7 @@ TARGETS = (1e-2, 1e-3)
 METRICS = (("displacement_error", "displacement"), ("stress_error", "stress"))
 PER_CELL = 2
 CFL = 0.2
+EDGES = "triangle edges"      # the triangle series with Particles.fill_edges' edge domains
 
 
 def cheapest(runs, metric, target):
@@ -124,6 +126,7 @@ def series_list():
     standard family."""
     quads = [("Explicit", "MUSL", s, "quadrilateral") for s in SHAPES]
     tris = [("Explicit", "MUSL", s, "triangle") for s in ("auto", "mpm")]
+    tris.insert(1, ("Explicit", "MUSL", "auto", EDGES))
     return quads + tris + [("Newmark", "Newmark", "mpm", "quadrilateral"),
                            ("Newmark", "Newmark", "cpgimp", "quadrilateral")]
 
@@ -138,8 +141,9 @@ def run_one(kind, scheme, shape, cell, n_cells, comm):
     from ..problems.mms import axis_aligned, errors
     integ = _integrator(kind, scheme)
     t0 = time.perf_counter()
+    fill = "edges" if cell == EDGES else "cells"
     sim, ex = axis_aligned(integ, n_cells=n_cells, per_cell=PER_CELL, shape=shape, cfl=CFL,
-                           comm=comm, cell_type=getattr(CellType, cell))
+                           comm=comm, cell_type=getattr(CellType, cell.split()[0]), fill=fill)
     setup = common.gmax(comm, time.perf_counter() - t0)
     wall, _ = common.timed_run(sim, ex.steps)
     err = errors(sim, ex)
@@ -153,7 +157,8 @@ def run_one(kind, scheme, shape, cell, n_cells, comm):
     if cell != "quadrilateral":
         series += f" {cell}"
     cfg = dict(problem="V3 MMS axis-aligned", integrator=kind, scheme=scheme, shape=sim.shape,
-               h=ex.h, dt=ex.dt, ppc=PER_CELL ** 2, cell_type=cell, cells_along=n_cells,
+               h=ex.h, dt=ex.dt, ppc=n / common.gsum(comm, sim.grid.n_owned_cells),
+               fill=fill, cell_type=cell.split()[0], cells_along=n_cells,
                A=ex.A, E=ex.E, nu=ex.nu, density=ex.rho, t_end=ex.t_end,
                dt_rule=f"{CFL:g} h / c_p" if integ.explicit else "h / c_p")
     rec = common.make_record(f"{series} n={n_cells}", cfg, n, common.gsum(comm, sim.grid.n_owned_cells),

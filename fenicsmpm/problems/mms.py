@@ -125,11 +125,12 @@ class AxisAligned:
 
 def axis_aligned(integrator, n_cells=16, per_cell=2, shape="mpm", A=0.05, E=1e7, nu=0.3,
                  density=1000.0, dt=None, cfl=0.2, cell_type=dmesh.CellType.quadrilateral,
-                 comm=MPI.COMM_WORLD, partitioner=None):
+                 comm=MPI.COMM_WORLD, partitioner=None, fill="cells"):
     """V3 on the unit square with n_cells x n_cells cells; returns (sim, exact), exact an
     AxisAligned with t_end and h. dt defaults to cfl * h / c_p (explicit) or h / c_p
     (implicit). Shapes other than "mpm" get the vertex-ghost partitioner (needed under MPI)
-    unless `partitioner` is given."""
+    unless `partitioner` is given. fill: "cells" (Particles.fill, per_cell per direction) or
+    "edges" (Particles.fill_edges on triangles: one particle per edge, per_cell unused)."""
     ex = AxisAligned(A, E, nu, density)
     if partitioner is None and shape != "mpm":
         partitioner = vertex_ghost_partitioner()
@@ -137,7 +138,11 @@ def axis_aligned(integrator, n_cells=16, per_cell=2, shape="mpm", A=0.05, E=1e7,
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [1.0, 1.0]], [n_cells, n_cells], cell_type, **kw)
     grid = Grid(msh)
     mat = NeoHookean(E=E, nu=nu, density=density)
-    pts = Particles.fill(grid, mat, per_cell=per_cell, velocity=lambda x: ex.velocity(x, 0.0))
+    vel = lambda x: ex.velocity(x, 0.0)                                   # noqa: E731
+    if fill not in ("cells", "edges"):
+        raise ValueError(f"axis_aligned: 'fill' must be 'cells' or 'edges', got {fill!r}")
+    pts = (Particles.fill_edges(grid, mat, velocity=vel) if fill == "edges" else
+           Particles.fill(grid, mat, per_cell=per_cell, velocity=vel))
     h = 1.0 / n_cells
     if dt is None:
         dt = (cfl if integrator.explicit else 1.0) * h / mat.p_wave_speed

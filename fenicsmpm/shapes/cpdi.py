@@ -524,11 +524,17 @@ class CpdiShape(PaddedStencil):
         from . import standard as ks
         self.version = int(version)
         self.d = d
-        self.simplex = grid.kind == ks.SIMPLEX
+        # quadrilateral domains on triangles: the edge diamonds of Particles.fill_edges
+        diamonds = (grid.kind == ks.SIMPLEX and hasattr(p, "cpdi_corners")
+                    and p.cpdi_corners.shape[1:] == (N_CORNERS, 2))
+        if diamonds and self.version != 2:
+            raise ValueError("shape='cpdi1': the edge domains of Particles.fill_edges are "
+                             "quadrilaterals that only CPDI2 moves (shape='cpdi2' or 'auto')")
+        self.simplex = grid.kind == ks.SIMPLEX and not diamonds
         self.n_corners = d + 1 if self.simplex else N_CORNERS if d == 2 else N_CORNERS_3D
         if self.simplex and not hasattr(p, "cpdi_t0"):
             p.add_field("cpdi_t0", (d + 1, d))[:] = initial_simplices(grid, p)
-        if not self.simplex and not hasattr(p, "cpdi_r0"):
+        if not self.simplex and not diamonds and not hasattr(p, "cpdi_r0"):
             p.add_field("cpdi_r0", (d, d))[:] = initial_edges(grid, p)
         if self.version == 2 and not hasattr(p, "cpdi_corners"):
             self._cpdi1_corners(p, p.add_field("cpdi_corners", (self.n_corners, d)))
@@ -546,12 +552,19 @@ class CpdiShape(PaddedStencil):
             cpdi1_corners3(p.x, p.F, p.cpdi_r0, out)
 
     def before_locate(self, sim):
-        """CPDI2: move the corners with the last step's grid displacement dt v_i (the nodal
-        velocity the integrator left in sim.nodal), x_c += sum_i S_i(x_c) dt v_i, with the
-        corner shape functions of that step (particles not yet migrated)."""
+        """Nothing: CPDI2's corners move at the end of the step that moved the grid
+        (after_step)."""
+
+    def after_step(self, sim, dt):
+        """CPDI2: move the corners with the step's grid displacement dt v_i (the nodal velocity
+        the integrator left in sim.nodal), x_c += sum_i S_i(x_c) dt v_i, with the corner shape
+        functions of that step (particles not yet migrated). Called by Simulation once a step
+        of dt is accepted, so a checkpoint holds the moved corners, a changed or halved dt
+        moves them by the step's own dt, and shapes evaluated between steps (output, probes)
+        do not move them again."""
         cs, self._corner_shape = self._corner_shape, None
         if self.version == 2 and cs is not None and "velocity" in sim.nodal:
-            move_corners(sim.grid.D, cs[0], cs[1], sim.dt * sim.nodal["velocity"],
+            move_corners(sim.grid.D, cs[0], cs[1], dt * sim.nodal["velocity"],
                          sim.particles.cpdi_corners)
 
     def evaluate(self, sim):

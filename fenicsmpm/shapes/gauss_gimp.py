@@ -98,6 +98,9 @@ class GaussGimpShape:
     def before_locate(self, sim):
         pass
 
+    def after_step(self, sim, dt):
+        pass
+
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
         particle's Gauss points reach (padded)."""

@@ -263,6 +263,10 @@ class PaddedStencil:
     compacting copy per step, and evaluates again at full width when a particle touches more
     nodes than last step."""
 
+    def after_step(self, sim, dt):
+        """Called by Simulation once a step of dt is accepted: nothing to do unless a family
+        moves particle-domain data with the grid (CPDI2's corners)."""
+
     def _init_buffers(self):
         self._buf = None
         self._nv = 0            # the node columns of the last evaluation (0: none yet)

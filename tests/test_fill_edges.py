@@ -1,0 +1,103 @@
+"""Particles.fill_edges: one particle per triangle-mesh edge, its domain the edge's diamond
+(the quadrilateral CPDI2 domain over the two cells of the edge; issue 15, stress order on
+triangles). Serial and under mpirun -n 2 (dolfinx's default partitioner)."""
+import os
+
+import numpy as np
+import pytest
+from dolfinx import mesh as dmesh
+from dolfinx.mesh import CellType
+from mpi4py import MPI
+
+import fenicsmpm as fm
+from fenicsmpm.problems.mms import axis_aligned, errors
+
+comm = MPI.COMM_WORLD
+MAT = fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)
+
+
+def _grid(nx, ny, cell=CellType.triangle, length=2.0):
+    return fm.Grid(dmesh.create_rectangle(comm, [[0.0, 0.0], [length, 1.0]], [nx, ny], cell))
+
+
+def _sum(a):
+    return comm.allreduce(float(np.sum(a)))
+
+
+def _shoelace(q):
+    x, y = q[..., 0], q[..., 1]
+    return 0.5 * np.sum(x * np.roll(y, -1, axis=-1) - np.roll(x, -1, axis=-1) * y, axis=-1)
+
+
+def test_edge_domains_tile_the_body():
+    """One particle per edge (nx (ny + 1) + ny (nx + 1) + nx ny of them), each domain a
+    counter-clockwise quadrilateral of the particle's area (round-off), the areas summing to
+    the body's; the particle sits at its domain's centroid, inside it."""
+    nx, ny = 6, 4
+    p = fm.Particles.fill_edges(_grid(nx, ny), MAT)
+    assert p.n_global() == nx * (ny + 1) + ny * (nx + 1) + nx * ny
+    assert abs(_sum(p.V0) - 2.0) < 1e-12
+    area = _shoelace(p.cpdi_corners)
+    assert np.all(area > 0.0) and np.allclose(area, p.V0, rtol=1e-12, atol=0.0)
+    assert np.allclose(p.mass, 1000.0 * p.V0, rtol=1e-15)
+    assert len(np.unique(p.id)) == len(p) and comm.allreduce(len(p)) == p.n_global()
+
+
+def test_region_selects_cells_by_their_centroids():
+    """An edge between a material cell and an empty one gets the material side's half."""
+    p = fm.Particles.fill_edges(_grid(6, 4), MAT, region=lambda x: x[:, 0] < 1.0)
+    assert abs(_sum(p.V0) - 1.0) < 1e-12
+    assert comm.allreduce(float(p.x[:, 0].max(initial=-1.0)), op=MPI.MAX) < 1.0
+
+
+def test_bad_input_names_the_problem():
+    with pytest.raises(ValueError, match="fill_edges: needs a plane 2D triangle mesh"):
+        fm.Particles.fill_edges(_grid(2, 2, CellType.quadrilateral), MAT)
+    g = _grid(4, 2)
+    with pytest.raises(ValueError, match="only CPDI2"):
+        fm.Simulation(g, fm.Particles.fill_edges(g, MAT), fm.Explicit(), dt=1e-4, shape="cpdi1")
+    with pytest.raises(ValueError, match="selects no cell"):
+        fm.Particles.fill_edges(_grid(2, 2), MAT, region=lambda x: x[:, 0] > 5.0)
+
+
+def _mms(n, fill):
+    sim, ex = axis_aligned(fm.Explicit("MUSL"), n_cells=n, shape="auto",
+                           cell_type=CellType.triangle, fill=fill)
+    assert sim.shape == "cpdi2", sim.shape
+    sim.run(steps=ex.steps, progress=False)
+    return errors(sim, ex)
+
+
+def test_edge_domains_converge_faster_in_stress():
+    """V3 MMS on triangles with the default shape ("auto": CPDI2). Measured (`python -m
+    fenicsmpm.bench mms`, series "auto triangle edges"; serial and 2 ranks alike): stress
+    0.0437 / 0.0110 at n = 16 / 32 (pair order 1.99) against 0.0555 / 0.0208 (1.41) with
+    Particles.fill's sub-triangles; displacement 0.0171 / 0.00488. Asserted: stress ratio
+    <= 0.27 (order >= 1.89), stress at n = 32 below 0.0115 and below 0.6 times the
+    sub-triangles' (measured 0.53), displacement at n = 32 below 0.0051."""
+    e16, e32 = _mms(16, "edges"), _mms(32, "edges")
+    cells32 = _mms(32, "cells")
+    rs = e32["stress"] / e16["stress"]
+    assert rs <= 0.27, (e16, e32, rs)
+    assert e32["stress"] < 0.0115 and e32["stress"] < 0.6 * cells32["stress"], (e32, cells32)
+    assert e32["displacement"] < 0.0051, e32
+
+
+@pytest.mark.parametrize("fill", ["edges", "cells"])
+def test_restart_is_bit_for_bit(shared_tmp_path, fill):
+    """CPDI2's corners travel with the particles through a checkpoint, moved by the last step
+    before it (shapes.cpdi.CpdiShape.after_step; before, they moved at the start of the next
+    step and a restarted run skipped that move): the edge domains and Particles.fill's
+    sub-triangles."""
+    def build():
+        return axis_aligned(fm.Explicit("MUSL"), n_cells=8, shape="auto",
+                            cell_type=CellType.triangle, fill=fill)[0]
+    ref = build()
+    ref.run(steps=20, progress=False)
+    first = build()
+    path = os.path.join(shared_tmp_path, "ck")
+    first.run(steps=10, checkpoint=path, checkpoint_every=10, progress=False)
+    again = fm.Simulation.restart(path, build)
+    again.run(steps=10, progress=False)
+    for f in ("x", "v", "stress", "cpdi_corners"):
+        assert np.array_equal(getattr(ref.particles, f), getattr(again.particles, f)), f
