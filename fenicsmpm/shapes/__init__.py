@@ -18,7 +18,8 @@ def choose_shape(sim):
     The most accurate family the mesh supports, by measurement (bench techniques, mms,
     column-peers; issue 15): cpGIMP on structured axis-aligned quadrilateral/hexahedral
     grids, CPDI2 on other 2D meshes (unstructured quadrilaterals; triangles, with the
-    sub-triangles of Particles.fill as domains: V3 MMS orders 1.78 / 1.39, bench mms), CPDI1 on other
+    sub-triangles of Particles.fill as domains: V3 MMS orders 1.78 / 1.39; with the edge
+    diamonds of Particles.fill_edges 1.66 / 1.76, bench mms), CPDI1 on other
     3D meshes (tetrahedra: tetrahedral domains, the sub-tetrahedra of Particles.fill that tile
     the cells; hexahedra: parallelepipeds). 3D soft column on tetrahedra (BENCHMARKS L1 soft
     case, `PYTHONPATH=. python tests/test_cpdi3d.py`), max |sigma_zz + rho g d| / (rho g H)

@@ -504,7 +504,9 @@ class CpdiShape(PaddedStencil):
     parallelepiped domains (CPDI1), quadrilateral / hexahedral domains (CPDI2); on triangle and
     tetrahedron meshes triangular / tetrahedral domains (the sub-simplices of
     Particles.fill, initial_simplices), moved affinely with F (CPDI1) or corner by corner
-    (CPDI2; Sadeghirad et al. 2013).
+    (CPDI2; Sadeghirad et al. 2013); on triangles, particles that bring 4 corners in
+    `cpdi_corners` (the edge diamonds of Particles.fill_edges) keep quadrilateral domains
+    (CPDI2 only).
 
     Adds the particle field `cpdi_r0` (n, d, d), the initial edge vectors (initial_edges), or on
     simplex meshes `cpdi_t0` (n, d + 1, d), the initial corner offsets, and for CPDI2
