@@ -63,6 +63,26 @@ def test_bad_input_names_the_problem():
         fm.Particles.fill_edges(_grid(2, 2), MAT, region=lambda x: x[:, 0] > 5.0)
 
 
+def test_a_family_that_ignores_the_edge_domains_warns():
+    """Mohr-Coulomb gets the standard family from shape="auto" (docs/guide/choosing.md),
+    which would see 1.5 points a cell: the user is told."""
+    g = _grid(4, 2)
+    soil = fm.MohrCoulomb(E=1e7, nu=0.3, density=1800.0, phi=30.0, c=0.0)
+    ctx = (pytest.warns(RuntimeWarning, match="fill_edges carry quadrilateral CPDI2 domains")
+           if comm.rank == 0 else _nothing())
+    with ctx:
+        sim = fm.Simulation(g, fm.Particles.fill_edges(g, soil), fm.Explicit(), dt=1e-4)
+    assert sim.shape == "mpm"
+
+
+class _nothing:
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *a):
+        return False
+
+
 def _mms(n, fill):
     sim, ex = axis_aligned(fm.Explicit("MUSL"), n_cells=n, shape="auto",
                            cell_type=CellType.triangle, fill=fill)

@@ -8,6 +8,8 @@ import logging
 
 import numpy as np
 
+from . import standard as _standard
+
 SHAPES = ("auto", "mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss", "bspline2")
 _log = logging.getLogger("fenicsmpm")
 
@@ -95,11 +97,18 @@ def _coarse_fill(sim, lat):
 def resolve_shape(sim, shape):
     """The family to use for the Simulation option `shape` ("auto" -> choose_shape, logged
     once on rank 0 with its reason), and the reason ("" when asked for by name)."""
-    if shape != "auto":
-        return shape, ""
-    family, reason = choose_shape(sim)
-    if sim.comm.rank == 0:
+    family, reason = (shape, "") if shape != "auto" else choose_shape(sim)
+    if shape == "auto" and sim.comm.rank == 0:
         _log.info("shape='auto': %s (%s)", family, reason)
+    corners = getattr(sim.particles, "cpdi_corners", None)
+    if (family not in ("cpdi1", "cpdi2") and corners is not None and corners.shape[1] == 4
+            and sim.grid.kind == _standard.SIMPLEX and sim.comm.rank == 0):
+        import warnings
+        warnings.warn(f"Simulation: the particles of Particles.fill_edges carry quadrilateral "
+                      f"CPDI2 domains, which shape={family!r}"
+                      f"{' (' + reason + ')' if reason else ''} does not use: it sees 1.5 "
+                      f"points a cell; use Particles.fill for this scene", RuntimeWarning,
+                      stacklevel=3)
     return family, reason
 
 
