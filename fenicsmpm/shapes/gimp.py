@@ -68,6 +68,27 @@ def _weight(a, b, inv_w, xi_node, L, inv_L, inv_2L):
 
 
 @njit(cache=True)
+def _closed_weight(dd, L, lp, inv_L, inv_Ll):
+    """_weight of an unclipped box of half-width lp <= L / 2 centred at distance dd = x_p -
+    x_node from the node, in closed form (Bardenhagen & Kober 2004, eq 40 and its
+    derivative; inv_L = 1 / L, inv_Ll = 1 / (L lp)):
+        S = 1 - (dd^2 + lp^2) / (2 L lp),  dS = -dd / (L lp)              |dd| < lp
+        S = 1 - |dd| / L,                  dS = -sign(dd) / L             lp <= |dd| <= L - lp
+        S = t^2 / (4 L lp),                dS = -sign(dd) t / (2 L lp)    t = L + lp - |dd| > 0
+    with the same 1e-12 L cut-off of a vanishing overlap as _weight."""
+    ad = abs(dd)
+    if ad < lp:
+        return 1.0 - (dd * dd + lp * lp) * 0.5 * inv_Ll, -dd * inv_Ll
+    if ad <= L - lp:
+        return 1.0 - ad * inv_L, -inv_L if dd > 0.0 else inv_L
+    t = L + lp - ad
+    if t <= 1e-12 * L:
+        return 0.0, 0.0
+    g = 0.5 * t * inv_Ll
+    return 0.5 * t * g, -g if dd > 0.0 else g
+
+
+@njit(cache=True)
 def half_width(lp0, Fkk, L, contiguous):
     """The box half-width along one axis: min(lp0 |F_kk|, L) for cpGIMP (contiguous), lp0 for
     uGIMP (module docstring)."""
@@ -155,13 +176,19 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
             lp = half_width(lp0[p, k], F[p, k, k], L, contiguous)
             a = max(x[p, k] - lp, lo[k])
             b = min(x[p, k] + lp, hi[k])
-            inv_w = 1.0 / (b - a)
             j0 = int(np.floor((a - origin[k]) / L))
+            closed = lp <= 0.5 * L and a == x[p, k] - lp and b == x[p, k] + lp
+            inv_w = 1.0 / (b - a)
+            inv_Ll = 1.0 / (L * lp) if closed else 0.0
             for q in range(ns):
                 j = j0 + q
                 jl = j - ilo[k]
                 off[k, q] = jl * stride if 0 <= jl < nlat[k] else -1
-                S, dS = _weight(a, b, inv_w, origin[k] + j * L, L, inv_L[k], inv_2L[k])
+                if closed:
+                    S, dS = _closed_weight(x[p, k] - (origin[k] + j * L), L, lp, inv_L[k],
+                                           inv_Ll)
+                else:
+                    S, dS = _weight(a, b, inv_w, origin[k] + j * L, L, inv_L[k], inv_2L[k])
                 Sk[k, q] = S
                 dSk[k, q] = dS
             stride *= nlat[k]
