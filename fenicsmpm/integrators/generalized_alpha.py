@@ -219,7 +219,7 @@ class ExplicitGeneralizedAlpha:
         sim.stress_update(du, 1.0)
         if sim.robin is not None:
             sim.robin_u += du
-        sim.nodal = dict(mass=m, velocity=v1, active=active)
+        sim.nodal = dict(mass=m, velocity=v1, active=active, displacement=du)
 
 
 class ImplicitGeneralizedAlpha(Newmark):

@@ -429,6 +429,7 @@ class Newmark(_Newton):
         sim.timers["g2p"] += time.perf_counter() - t0
         sim.commit(sim._dF)
         sim.nodal["velocity"] = v1
+        sim.nodal["displacement"] = du          # what the particles moved by (CPDI2 corners)
         if sim.monitoring_work:        # trapezoidal work: (f^n + f^{n+1}) / 2 . du, du = dt (v0 + v1) / 2
             f_mid = 0.5 * (f_ext + sim.external_force(sim.t, m))
             sim.record_work(f_mid, sim.boundary_force(v1), v0, v1, dt)
@@ -488,3 +489,4 @@ class QuasiStatic(_Newton):
         p.v[:] = 0.0
         sim.commit(sim._dF)
         sim.nodal["velocity"] = du / dt
+        sim.nodal["displacement"] = du

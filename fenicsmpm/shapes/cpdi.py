@@ -558,16 +558,18 @@ class CpdiShape(PaddedStencil):
         (after_step)."""
 
     def after_step(self, sim, dt):
-        """CPDI2: move the corners with the step's grid displacement dt v_i (the nodal velocity
-        the integrator left in sim.nodal), x_c += sum_i S_i(x_c) dt v_i, with the corner shape
-        functions of that step (particles not yet migrated). Called by Simulation once a step
+        """CPDI2: move the corners with the step's grid displacement u_i, x_c += sum_i S_i(x_c)
+        u_i, with the corner shape functions of that step (particles not yet migrated): the
+        increment the particles moved by, sim.nodal["displacement"] where the integrator
+        leaves it (Newmark, generalized-alpha: du), else dt v_i (explicit, quasi-static). Called by Simulation once a step
         of dt is accepted, so a checkpoint holds the moved corners, a changed or halved dt
         moves them by the step's own dt, and shapes evaluated between steps (output, probes)
         do not move them again."""
         cs, self._corner_shape = self._corner_shape, None
         if self.version == 2 and cs is not None and "velocity" in sim.nodal:
-            move_corners(sim.grid.D, cs[0], cs[1], dt * sim.nodal["velocity"],
-                         sim.particles.cpdi_corners)
+            du = sim.nodal.get("displacement")
+            move_corners(sim.grid.D, cs[0], cs[1], dt * sim.nodal["velocity"] if du is None
+                         else du, sim.particles.cpdi_corners)
 
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
