@@ -11,7 +11,8 @@ but a rigid rotation does not trigger a split (the seed's F_11 < beta would, at 
 The voxel is cut across its longest current edge E_k: the children sit at x +- E_k / 4 with
 half the mass and volumes, the parent's F, stress and history, the velocity of the parent's
 affine field v +- L E_k / 4 (L = sum_i v_i (x) grad N_i of the step just taken, so mass and
-momentum are conserved exactly), E_k halved, and E_ref reset to the children's E (the seed
+momentum are conserved exactly), E_k halved, each its half of the parent's particle domain
+(cpGIMP box, CPDI corners or edges: halve_domains), and E_ref reset to the children's E (the seed
 resets the triggering component of F^split; resetting all of them keeps F_s objective).
 Under MPI new ids continue the global numbering (one exscan and one allreduce per check)."""
 import numpy as np
@@ -92,6 +93,75 @@ def place_children(parents, edge, x, v, L, E, E_ref, child):
                 E_ref[c, i, j] = E[p, i, j]
 
 
+def _corner_pairs(n_corners, d):
+    """The ways to halve a CPDI domain of n_corners corners: per candidate, the corner pairs
+    (i, j) whose midpoints the cut passes through. Simplices (d + 1 corners): each edge, one
+    pair (the cut runs from its midpoint to the opposite vertices); quadrilaterals (corners
+    counter-clockwise): the two pairs of opposite edges; hexahedra (corner b0 + 2 b1 + 4 b2):
+    the four edges along each reference axis."""
+    if n_corners == d + 1:
+        return [[(i, j)] for i in range(n_corners) for j in range(i + 1, n_corners)]
+    if d == 2:
+        return [[(0, 1), (3, 2)], [(0, 3), (1, 2)]]
+    return [[(c, c | (1 << m)) for c in range(8) if not c & (1 << m)] for m in range(3)]
+
+
+def halve_domains(p, parents, child, cut):
+    """Give the children of a split their half of the parent's particle domain (the voxel is
+    cut across `cut`, (n_parents, d), the parent row keeping the + side as place_children
+    does): cpGIMP/uGIMP half-widths `gimp_l0` halved along the grid axis closest to `cut`;
+    CPDI2 corners `cpdi_corners` (and CPDI1's simplex offsets `cpdi_t0`, recentred) cut through
+    the midpoints of the corner pairs most nearly along `cut` (_corner_pairs: a corner j moves
+    to the pair's midpoint in the half of i, and the other way round); CPDI1's and
+    Gauss-GIMP's edges `cpdi_r0`: the one most nearly along `cut` (after F) halved. Without
+    this both children kept the parent's whole domain with half its mass."""
+    if len(parents) == 0:
+        return
+    if hasattr(p, "gimp_l0"):
+        axis = np.argmax(np.abs(cut), axis=1)
+        p.gimp_l0[parents, axis] *= 0.5
+        p.gimp_l0[child] = p.gimp_l0[parents]
+    d = cut.shape[1]
+    F = p.F[parents][:, :d, :d]
+    if hasattr(p, "cpdi_corners"):                            # CPDI2: current corners
+        _cut_corners(p.cpdi_corners, p.cpdi_corners[parents], parents, child, cut, False)
+    if hasattr(p, "cpdi_t0"):                                 # CPDI1 simplices: offsets F t0
+        _cut_corners(p.cpdi_t0, p.cpdi_t0[parents], parents, child, cut, True,
+                     np.einsum("nij,nkj->nki", F, p.cpdi_t0[parents]))
+    if hasattr(p, "cpdi_r0"):                                 # CPDI1 / Gauss-GIMP edges F r0_k
+        e = np.einsum("nij,nkj->nki", F, p.cpdi_r0[parents])
+        k = np.argmax(np.abs(np.einsum("nkd,nd->nk", e, cut)) / np.linalg.norm(e, axis=2), axis=1)
+        p.cpdi_r0[parents, k] *= 0.5
+        p.cpdi_r0[child] = p.cpdi_r0[parents]
+
+
+def _cut_corners(field, c, parents, child, cut, recentre, current=None):
+    """Cut the domains of corners c (n, k, d) in two (halve_domains) and write the + half to
+    the parents' rows of `field`, the other to the children's; the cut is chosen on the
+    `current` corners (default c). recentre: store each half as offsets from its centroid
+    (CPDI1's cpdi_t0)."""
+    cur = c if current is None else current
+    cands = _corner_pairs(c.shape[1], c.shape[2])
+    align = np.stack([sum(np.abs(np.einsum("nd,nd->n", cur[:, j] - cur[:, i], cut))
+                          for i, j in pairs) /
+                      sum(np.linalg.norm(cur[:, j] - cur[:, i], axis=1) for i, j in pairs)
+                      for pairs in cands], axis=1)
+    best = np.argmax(align, axis=1)
+    lo, hi = c.copy(), c.copy()
+    lo_c, hi_c = cur.copy(), cur.copy()
+    for b, pairs in enumerate(cands):
+        sel = best == b
+        for i, j in pairs:
+            lo[sel, j] = hi[sel, i] = 0.5 * (c[sel, i] + c[sel, j])     # lo: the half of i
+            lo_c[sel, j] = hi_c[sel, i] = 0.5 * (cur[sel, i] + cur[sel, j])
+    plus = np.einsum("nd,nd->n", hi_c.mean(axis=1) - lo_c.mean(axis=1), cut) > 0.0
+    if recentre:
+        lo -= lo.mean(axis=1, keepdims=True)
+        hi -= hi.mean(axis=1, keepdims=True)
+    field[parents] = np.where(plus[:, None, None], hi, lo)
+    field[child] = np.where(plus[:, None, None], lo, hi)
+
+
 class Splitting:
     """Splitting of `sim`'s particles by eq 3.25, checked every `every` steps (see module)."""
 
@@ -150,7 +220,9 @@ class Splitting:
             a[parents] *= 0.5
             a[child] = a[parents]
         L = np.concatenate([L, L[parents]])
+        cut = p.voxel[parents, :, edge[parents]]              # the voxel edge cut across
         place_children(parents, edge[parents], p.x, p.v, L, p.voxel, p.voxel_ref, child)
+        halve_domains(p, parents, child, cut)
         p.id[child] = self.next_id + start + np.arange(len(parents))
         self.next_id += total
         self.count += total

@@ -115,3 +115,41 @@ def test_restart_continues_split_ids(shared_tmp_path):
     assert again.splitting.count == ref.splitting.count > first.splitting.count
     assert np.array_equal(again.particles.id, ref.particles.id)
     assert np.array_equal(again.particles.x, ref.particles.x)
+
+
+@pytest.mark.parametrize("cell, shape", [(mesh.CellType.quadrilateral, "auto"),
+                                         (mesh.CellType.quadrilateral, "cpdi2"),
+                                         (mesh.CellType.triangle, "auto"),
+                                         (mesh.CellType.quadrilateral, "cpdi1"),
+                                         (mesh.CellType.triangle, "cpdi1")],
+                         ids=["cpgimp", "cpdi2-quads", "cpdi2-triangles", "cpdi1-quads",
+                              "cpdi1-triangles"])
+def test_children_get_half_the_parents_domain(cell, shape):
+    """The children of a split share the parent's particle domain (splitting.halve_domains):
+    cpGIMP boxes halve along the cut axis, CPDI2 domains are cut in two through edge
+    midpoints. Every domain then has its particle's volume (round-off) and the domains still
+    tile the 1 m^2 block. Before,
+    both children kept the parent's whole domain with half its mass. CPDI1's edges and
+    simplex offsets likewise. dolfinx's default
+    partitioner under MPI."""
+    msh = mesh.create_rectangle(WORLD, [[0, 0], [4, 4]], [8, 8], cell)
+    grid = fm.Grid(msh)
+    p = fm.Particles.fill(grid, fm.LinearElastic(E=1e-3, nu=0.0, density=1.0), per_cell=2,
+                          region=lambda x: np.all((x > 1.5) & (x < 2.5), axis=1))
+    sim = fm.Simulation(grid, p, fm.Explicit("USL"), dt=1e-3, shape=shape)
+    split = sim.enable_splitting()
+    sim.locate_and_shape()
+    sim.nodal = dict(velocity=np.zeros((grid.n_nodes, 2)))
+    p.voxel[::3, 0, 0] *= 2.5                                  # cut across x
+    assert split.apply(sim) > 0
+    if sim.shape == "cpgimp":
+        area = 4.0 * p.gimp_l0[:, 0] * p.gimp_l0[:, 1]         # F = I: box (2 l0x) x (2 l0y)
+        assert WORLD.allreduce(int(np.sum(np.isclose(p.gimp_l0[:, 0], 0.0625)))) > 0
+    elif sim.shape == "cpdi1" and cell == mesh.CellType.quadrilateral:
+        area = np.abs(np.linalg.det(p.cpdi_r0))                # parallelogram of r1, r2
+    else:
+        c = p.cpdi_corners if sim.shape == "cpdi2" else p.cpdi_t0
+        x, y = c[..., 0], c[..., 1]
+        area = 0.5 * np.sum(x * np.roll(y, -1, axis=1) - np.roll(x, -1, axis=1) * y, axis=1)
+    assert np.all(area > 0.0) and np.allclose(area, p.V, rtol=1e-12, atol=0.0)
+    assert abs(WORLD.allreduce(float(area.sum())) - 1.0) < 1e-12
