@@ -278,20 +278,16 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         kt.p2g_weighted(self.grid.D, self.nodes, self.N, self.particles.mass, q, out)
         return out
 
-    def active_mask(self, m, restrict=True):
+    def active_mask(self, m):
         """Active nodes: mass above mass_tolerance times the global largest nodal mass.
 
         Also restricts the particles' shape gradients to the active nodes (see
-        kernels.transfer.restrict_gradients), so all later stages use consistent gradients;
-        restrict=False leaves that to the caller's next pass over the gradients
-        (internal_force(..., active=...)), which must come before any other use of them."""
+        kernels.transfer.restrict_gradients), so all later stages use consistent gradients."""
         mmax = m.max() if len(m) else 0.0
         if self.comm.size > 1:
             from mpi4py import MPI
             mmax = self.comm.allreduce(mmax, op=MPI.MAX)
         active = m > self.mass_tolerance * mmax
-        if not restrict:
-            return active
         t0 = time.perf_counter()
         kt.restrict_gradients(self.grid.D, self.nodes, self.N, self.dN, active[:, None],
                               np.zeros(len(self.nodes), dtype=np.int64))
@@ -365,21 +361,15 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         fbar(group, p.V, dF, self.grid.n_cells * n_bodies,
              3 if self.gdim == 3 or self.axisymmetric else 2)
 
-    def internal_force(self, stress, out, volume=None, active=None):
-        """out += -sum_p V_p stress_p . grad N_ip (no body force). With `active` (the nodes of
-        active_mask(m, restrict=False)) the gradients are restricted to them in the same pass
-        (not with force_integration="mixed")."""
+    def internal_force(self, stress, out, volume=None):
+        """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
         p = self.particles
         if self.force_integration == "mixed":
-            if active is not None:
-                raise ValueError("internal_force: force_integration='mixed' reads the shape "
-                                 "gradients elsewhere first; restrict them in active_mask")
             from .integrators.mixed_integration import internal_force as mixed_force
             mixed_force(self, stress, out, volume)
             return
         V = p.V if volume is None else volume
-        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, V, stress,
-                     np.zeros(self.gdim), out, None if active is None else active[:, None])
+        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, V, stress, np.zeros(self.gdim), out)
         if self.axisymmetric:
             axi.hoop_force(self.nodes, self.N, self._field, V, stress, self._r, out[:, None, :])
 

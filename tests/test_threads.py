@@ -64,9 +64,8 @@ def test_p2g_chunks_match_serial(data, nc):
     assert _rel(m1, m0) < 1e-14 and _rel(mv1, mv0) < 1e-14
     f0, f1 = np.ones((nn, d)), np.ones((nn, d))
     args = (D, nodes, N, data["dN"], m, data["V"], data["S"], data["g"])
-    none = np.zeros((0, 1), dtype=np.bool_)                   # no gradient restriction
-    kt._force(*args, 0, n, f0, none)
-    kt._p2g_force_chunks(nc, *args, f1, *_bufs(nc, f1), none)
+    kt._force(*args, 0, n, f0)
+    kt._p2g_force_chunks(nc, *args, f1, *_bufs(nc, f1))
     assert _rel(f1, f0) < 1e-14
     q0, q1 = np.zeros((nn, d)), np.zeros((nn, d))
     kt._weighted(D, nodes, N, m, v, 0, n, q0)
@@ -232,19 +231,3 @@ def test_nonlocal_average_same_bits_on_1_and_2_threads():
         numba.set_num_threads(before)
     assert np.any(outs[0] != 0.0)
     assert np.array_equal(outs[0], outs[1])
-
-
-def test_force_pass_restricts_like_the_separate_pass(data):
-    """p2g_force(..., active) restricts each particle's gradients to the active nodes in its
-    own pass (the explicit MUSL/USL step): the same gradients and force, bit for bit, as
-    restrict_gradients followed by p2g_force."""
-    D, nodes, N, m, nn = (data[k] for k in ("D", "nodes", "N", "mass", "nn"))
-    active = np.ones(nn, dtype=bool)
-    active[::7] = False
-    dN0, dN1 = data["dN"].copy(), data["dN"].copy()
-    kt.restrict_gradients(D, nodes, N, dN0, active[:, None], np.zeros(len(nodes), np.int64))
-    f0, f1 = np.zeros((nn, len(D))), np.zeros((nn, len(D)))
-    kt.p2g_force(D, nodes, N, dN0, m, data["V"], data["S"], data["g"], f0)
-    kt.p2g_force(D, nodes, N, dN1, m, data["V"], data["S"], data["g"], f1, active[:, None])
-    assert not np.array_equal(dN0, data["dN"]), "no gradient restricted: the test checks nothing"
-    assert np.array_equal(dN1, dN0) and np.array_equal(f1, f0)

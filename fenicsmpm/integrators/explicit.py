@@ -180,10 +180,7 @@ class Explicit:
         m, mv = self._p2g(sim, p.v, p.x, True)
         grid.accumulate(m, mv)
         T["p2g"] += time.perf_counter() - t0
-        # MUSL / USL: the gradients are restricted to the active nodes in the internal force's
-        # pass, their first use; USF / AVG update the stress first (timed as "shape")
-        fused = self.scheme in ("MUSL", "USL") and sim.force_integration != "mixed"
-        active = sim.active_mask(m, restrict=not fused)
+        active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
         t0 = time.perf_counter()
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
         free = ~sim.fixed
@@ -198,7 +195,7 @@ class Explicit:
             sim.stress_update(v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
-        sim.internal_force(sim.dynamic_stress(p.stress), f, active=active if fused else None)
+        sim.internal_force(sim.dynamic_stress(p.stress), f)
         grid.accumulate(f)
         f_ext = sim.external_force(sim.t, m, active=active)
         f += f_ext

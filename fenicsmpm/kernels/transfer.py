@@ -154,12 +154,9 @@ def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, buf):
 
 
 @njit(cache=True)
-def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out, active):
+def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out):
     d = len(D)
-    scr = np.empty(d)
     for p in range(lo, hi):
-        if active.shape[0]:                 # restrict_gradients fused into this pass
-            _restrict_one(d, nodes, N, dN, active, 0, p, scr)
         for a in range(row_length(nodes, p)):
             i = nodes[p, a]
             for k in range(d):
@@ -169,33 +166,29 @@ def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out, active):
                 out[i, k] += N[p, a] * mass[p] * g[k] - V[p] * s
 
 
-def p2g_force(D, nodes, N, dN, mass, V, stress, g, out, active=None):
+def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
     """out_i += sum_p (N_ip m_p g - V_p stress_p . grad N_ip).
 
     `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
-    the step and start-of-step gradients and volumes this is the updated-Lagrangian force.
-    With `active` ((n_nodes, 1) bool) each particle's gradients are first restricted to the
-    active nodes in place (restrict_gradients, one field), in the same pass."""
+    the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
     nc = n_chunks(len(nodes))
-    act = np.zeros((0, 1), dtype=np.bool_) if active is None else active
-    _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, scratch(0, nc - 1, out),
-                      act)
+    _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, scratch(0, nc - 1, out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf, active):
+def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
     n = nodes.shape[0]
     if nc == 1:
-        return _force(D, nodes, N, dN, mass, V, stress, g, np.int64(0), n, out, active)
+        return _force(D, nodes, N, dN, mass, V, stress, g, np.int64(0), n, out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
-            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out, active)
+            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out)
         else:
             a, b = node_range(nodes, lo, hi, rng[c])
             buf[c - 1, a:b] = 0.0
-            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, buf[c - 1], active)
+            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, buf[c - 1])
     add_chunks2(out, buf, rng)
 
 
@@ -252,32 +245,27 @@ def _restrict(D, nodes, N, dN, active, field, lo, hi):
     d = len(D)
     s = np.empty(d)
     for p in range(lo, hi):
-        _restrict_one(d, nodes, N, dN, active, field[p], p, s)
-
-
-@njit(cache=True)
-def _restrict_one(d, nodes, N, dN, active, f, p, s):
-    """restrict_gradients for particle p seeing column f of active (s: d scratch)."""
-    full = True
-    m = row_length(nodes, p)
-    for a in range(m):
-        if not active[nodes[p, a], f]:
-            full = False
-    if full:
-        return
-    for k in range(d):
-        s[k] = 0.0
-    for a in range(m):
-        if active[nodes[p, a], f]:
-            for k in range(d):
-                s[k] += dN[p, a, k]
-    for a in range(m):
-        if active[nodes[p, a], f]:
-            for k in range(d):
-                dN[p, a, k] -= N[p, a] * s[k]
-        else:
-            for k in range(d):
-                dN[p, a, k] = 0.0
+        f = field[p]
+        full = True
+        m = row_length(nodes, p)
+        for a in range(m):
+            if not active[nodes[p, a], f]:
+                full = False
+        if full:
+            continue
+        for k in range(d):
+            s[k] = 0.0
+        for a in range(m):
+            if active[nodes[p, a], f]:
+                for k in range(d):
+                    s[k] += dN[p, a, k]
+        for a in range(m):
+            if active[nodes[p, a], f]:
+                for k in range(d):
+                    dN[p, a, k] -= N[p, a] * s[k]
+            else:
+                for k in range(d):
+                    dN[p, a, k] = 0.0
 
 
 @njit(parallel=PRANGE, cache=True)
