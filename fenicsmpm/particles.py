@@ -309,9 +309,15 @@ class Particles:
             if not any(m is q for q in mats):
                 mats.append(m)
             remap[k] = next(i for i, q in enumerate(mats) if q is m)
-        if self.optional or other.optional:
+        edges = [hasattr(q, "cpdi_corners") for q in (self, other)]
+        if edges[0] != edges[1]:
+            raise ValueError("Particles: cannot add a set made by Particles.fill_edges (its "
+                             "quadrilateral CPDI2 domains) to one without domains; make both "
+                             "with fill_edges, or both with fill")
+        if [n for n in self.optional + other.optional if n != "cpdi_corners"]:
             raise ValueError("Particles: add particle sets before starting stages or adding "
                              "particle-layer boundaries")
+        extra = ["cpdi_corners"] if edges[0] else []
         arrays = {name: np.concatenate([getattr(self, name), getattr(other, name)])
                   for name in FIELDS}
         arrays["material_id"] = np.concatenate([self.material_id, remap[other.material_id]])
@@ -320,6 +326,9 @@ class Particles:
         st[: len(self), : self.state.shape[1]] = self.state
         st[len(self):, : other.state.shape[1]] = other.state
         p = Particles(self.grid, mats, state=st, **arrays)
+        for name in extra:
+            p.add_field(name, getattr(self, name).shape[1:])[:] = np.concatenate(
+                [getattr(self, name), getattr(other, name)])
         p._number()
         return p
 

@@ -53,6 +53,23 @@ def test_region_selects_cells_by_their_centroids():
     assert comm.allreduce(float(p.x[:, 0].max(initial=-1.0)), op=MPI.MAX) < 1.0
 
 
+def test_two_bodies_add_up():
+    """Two edge-filled bodies merge with their domains; an edge set and a fill set do not."""
+    g = _grid(6, 4)
+    soft = fm.LinearElastic(E=1e5, nu=0.3, density=500.0)
+    left = fm.Particles.fill_edges(g, MAT, region=lambda x: x[:, 0] < 1.0)
+    right = fm.Particles.fill_edges(g, soft, region=lambda x: x[:, 0] > 1.0)
+    both = left + right
+    assert abs(_sum(both.V0) - 2.0) < 1e-12 and len(both.materials) == 2
+    assert np.array_equal(both.cpdi_corners, np.concatenate([left.cpdi_corners,
+                                                             right.cpdi_corners]))
+    sim = fm.Simulation(g, both, fm.Explicit(), dt="auto")
+    sim.run(steps=3, progress=False)
+    assert sim.shape == "cpdi2"
+    with pytest.raises(ValueError, match="fill_edges"):
+        left + fm.Particles.fill(g, soft, region=lambda x: x[:, 0] > 1.0)
+
+
 def test_bad_input_names_the_problem():
     with pytest.raises(ValueError, match="fill_edges: needs a plane 2D triangle mesh"):
         fm.Particles.fill_edges(_grid(2, 2, CellType.quadrilateral), MAT)
