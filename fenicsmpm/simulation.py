@@ -231,8 +231,6 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         meshes) and evaluate the shape functions (of the family `shape`) at their positions."""
         p, g = self.particles, self.grid
         t0 = time.perf_counter()
-        if self._wide is not None:
-            self._wide.before_locate(self)
         p.cell, p.xi = g.locate(p.x, p.cell)
         ids, xs = p.send_to_owners()
         if len(ids):

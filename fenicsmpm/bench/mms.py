@@ -125,8 +125,8 @@ def series_list():
     (the right-diagonal split of the same lattice) the default shape="auto" (CPDI2) and the
     standard family."""
     quads = [("Explicit", "MUSL", s, "quadrilateral") for s in SHAPES]
-    tris = [("Explicit", "MUSL", s, "triangle") for s in ("auto", "mpm")]
-    tris.insert(1, ("Explicit", "MUSL", "auto", EDGES))
+    tris = [("Explicit", "MUSL", s, c) for s, c in
+            (("auto", "triangle"), ("auto", EDGES), ("mpm", "triangle"))]
     return quads + tris + [("Newmark", "Newmark", "mpm", "quadrilateral"),
                            ("Newmark", "Newmark", "cpgimp", "quadrilateral")]
 

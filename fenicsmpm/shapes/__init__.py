@@ -8,8 +8,6 @@ import logging
 
 import numpy as np
 
-from . import standard as _standard
-
 SHAPES = ("auto", "mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss", "bspline2")
 _log = logging.getLogger("fenicsmpm")
 
@@ -100,9 +98,9 @@ def resolve_shape(sim, shape):
     family, reason = (shape, "") if shape != "auto" else choose_shape(sim)
     if shape == "auto" and sim.comm.rank == 0:
         _log.info("shape='auto': %s (%s)", family, reason)
-    corners = getattr(sim.particles, "cpdi_corners", None)
-    if (family not in ("cpdi1", "cpdi2") and corners is not None and corners.shape[1] == 4
-            and sim.grid.kind == _standard.SIMPLEX and sim.comm.rank == 0):
+    from .cpdi import has_edge_domains
+    if (family not in ("cpdi1", "cpdi2") and sim.comm.rank == 0
+            and has_edge_domains(sim.grid, sim.particles)):
         import warnings
         warnings.warn(f"Simulation: the particles of Particles.fill_edges carry quadrilateral "
                       f"CPDI2 domains, which shape={family!r}"

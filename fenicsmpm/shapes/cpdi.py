@@ -499,6 +499,14 @@ def initial_edges(grid, particles):
     return r0
 
 
+def has_edge_domains(grid, particles):
+    """Whether `particles` carry the quadrilateral domains of Particles.fill_edges on a
+    triangle mesh (4 corners in `cpdi_corners`; fill's sub-triangles have 3)."""
+    from . import standard as ks
+    c = getattr(particles, "cpdi_corners", None)
+    return grid.kind == ks.SIMPLEX and c is not None and c.shape[1:] == (N_CORNERS, 2)
+
+
 class CpdiShape(PaddedStencil):
     """CPDI1 (version 1) or CPDI2 (version 2) for a 2D or 3D Simulation: parallelogram /
     parallelepiped domains (CPDI1), quadrilateral / hexahedral domains (CPDI2); on triangle and
@@ -527,8 +535,7 @@ class CpdiShape(PaddedStencil):
         self.version = int(version)
         self.d = d
         # quadrilateral domains on triangles: the edge diamonds of Particles.fill_edges
-        diamonds = (grid.kind == ks.SIMPLEX and hasattr(p, "cpdi_corners")
-                    and p.cpdi_corners.shape[1:] == (N_CORNERS, 2))
+        diamonds = has_edge_domains(grid, p)
         if diamonds and self.version != 2:
             raise ValueError("shape='cpdi1': the edge domains of Particles.fill_edges are "
                              "quadrilaterals that only CPDI2 moves (shape='cpdi2' or 'auto')")
@@ -553,18 +560,14 @@ class CpdiShape(PaddedStencil):
         else:
             cpdi1_corners3(p.x, p.F, p.cpdi_r0, out)
 
-    def before_locate(self, sim):
-        """Nothing: CPDI2's corners move at the end of the step that moved the grid
-        (after_step)."""
-
     def after_step(self, sim, dt):
         """CPDI2: move the corners with the step's grid displacement u_i, x_c += sum_i S_i(x_c)
         u_i, with the corner shape functions of that step (particles not yet migrated): the
         increment the particles moved by, sim.nodal["displacement"] where the integrator
-        leaves it (Newmark, generalized-alpha: du), else dt v_i (explicit, quasi-static). Called by Simulation once a step
-        of dt is accepted, so a checkpoint holds the moved corners, a changed or halved dt
-        moves them by the step's own dt, and shapes evaluated between steps (output, probes)
-        do not move them again."""
+        leaves it (Newmark, generalized-alpha, quasi-static), else dt v_i (explicit). Called
+        by Simulation once a step of dt is accepted, so a checkpoint holds the moved corners,
+        a changed or halved dt moves them by the step's own dt, and shapes evaluated between
+        steps (output, probes) do not move them again."""
         cs, self._corner_shape = self._corner_shape, None
         if self.version == 2 and cs is not None and "velocity" in sim.nodal:
             du = sim.nodal.get("displacement")

@@ -95,11 +95,8 @@ class GaussGimpShape:
         if not hasattr(p, "cpdi_r0"):
             p.add_field("cpdi_r0", (2, 2))[:] = initial_edges(grid, p)
 
-    def before_locate(self, sim):
-        pass
-
     def after_step(self, sim, dt):
-        pass
+        """Nothing to move: the Gauss points follow x_p and F."""
 
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a

@@ -328,9 +328,6 @@ class LatticeShape(PaddedStencil):
     that is not local."""
     name = "lattice"
 
-    def before_locate(self, sim):
-        """Nothing to move: the weights follow x_p (and F for cpGIMP)."""
-
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles, nv = the largest number of nodes a particle
         touches (padded)."""
