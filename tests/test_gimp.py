@@ -263,7 +263,7 @@ def test_tensor_product_against_numpy_outer_products(d, keep):
         nv = ns ** d
         nodes, N = np.zeros((1, nv), np.int32), np.zeros((1, nv))
         dN, cnt = np.zeros((1, nv, d)), np.zeros(1, np.int64)
-        bad = tensor_product(d, ns, Sk, dSk, off, table, 0, keep, nodes, N, dN, cnt)
+        bad = tensor_product(d, np.full(d, ns, dtype=np.int64), Sk, dSk, off, table, 0, keep, nodes, N, dN, cnt)
         local = [r for r in ref if r[0] >= 0]
         assert bad == (len(local) < len(ref))
         assert cnt[0] == len(local)

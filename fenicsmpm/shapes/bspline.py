@@ -99,6 +99,7 @@ def _bspline(D, x, origin, spacing, ncells, ilo, nlat, table, p0, p1,
     off = np.empty((d, NS), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
     S = np.empty(NS)
     dS = np.empty(NS)
+    nsk = np.full(d, NS, dtype=np.int64)
     bad = -1
     for p in range(p0, p1):
         stride = 1
@@ -111,7 +112,7 @@ def _bspline(D, x, origin, spacing, ncells, ilo, nlat, table, p0, p1,
                 Sk[k, q] = S[q]
                 dSk[k, q] = dS[q]
             stride *= nlat[k]
-        if tensor_product(d, NS, Sk, dSk, off, table, p, True,
+        if tensor_product(d, nsk, Sk, dSk, off, table, p, True,
                           nodes_out, N_out, dN_out, count_out):
             bad = p
     return bad

@@ -107,12 +107,12 @@ def half_widths(lp0, F, spacing, contiguous):
 
 
 @njit(cache=True)
-def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
+def tensor_product(d, nsk, Sk, dSk, off, table, p, keep_gradients,
                    nodes_out, N_out, dN_out, count_out):
     """Write particle p's tensor-product weights into row p of the outputs (shared by the
-    lattice families: gimp, bspline; d = 1, 2 or 3). Sk/dSk (d, ns): the 1D weights and their
-    derivatives of the ns lattice nodes looked at per axis; off (d, ns): their flat lattice
-    offsets (-1: outside the local lattice). Node (a, b, c) has the weight Sx_a Sy_b Sz_c and
+    lattice families: gimp, bspline; d = 1, 2 or 3). nsk (d,): the lattice nodes looked at
+    on each axis; Sk/dSk (d, >= nsk[k]): their 1D weights and derivatives; off: their flat
+    lattice offsets (-1: outside the local lattice). Node (a, b, c) has the weight Sx_a Sy_b Sz_c and
     the gradient (dSx_a Sy_b Sz_c, dSy_b Sx_a Sz_c, dSz_c Sx_a Sy_b) (missing axes: factor 1),
     in nested loops, axis 0 fastest. A node of weight 0 is skipped, unless `keep_gradients`
     and one of its gradient components is not 0 (a node whose 1D weight vanishes at the
@@ -124,16 +124,16 @@ def tensor_product(d, ns, Sk, dSk, off, table, p, keep_gradients,
     bad = False
     cnt = 0
     pad = -1
-    for c in range(ns if d == 3 else 1):
+    for c in range(nsk[2] if d == 3 else 1):
         Sz = Sk[2, c] if d == 3 else 1.0
         dSz = dSk[2, c] if d == 3 else 0.0
         oz = off[2, c] if d == 3 else 0
-        for b in range(ns if d >= 2 else 1):
+        for b in range(nsk[1] if d >= 2 else 1):
             Sy = Sk[1, b] if d >= 2 else 1.0
             dSy = dSk[1, b] if d >= 2 else 0.0
             oy = off[1, b] if d >= 2 else 0
             oyz = oy + oz if oy >= 0 and oz >= 0 else -1
-            for a in range(ns):
+            for a in range(nsk[0]):
                 w = Sk[0, a] * Sy * Sz
                 node = table[off[0, a] + oyz] if off[0, a] >= 0 and oyz >= 0 else -1
                 if w == 0.0 and not (keep_gradients and (dSk[0, a] * Sy * Sz != 0.0 or
@@ -166,6 +166,7 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
     Sk = np.empty((d, ns))
     dSk = np.empty((d, ns))
     off = np.empty((d, ns), dtype=np.int64)     # flat lattice offset of node q on axis k, -1 outside
+    nsk = np.empty(d, dtype=np.int64)           # nodes looked at on axis k
     inv_L = 1.0 / spacing
     inv_2L = 0.5 / spacing
     bad = -1
@@ -176,11 +177,15 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
             lp = half_width(lp0[p, k], F[p, k, k], L, contiguous)
             a = max(x[p, k] - lp, lo[k])
             b = min(x[p, k] + lp, hi[k])
-            j0 = int(np.floor((a - origin[k]) / L))
+            j0 = int(np.floor((a - origin[k]) / L))     # the last node at or below a ...
+            nsk[k] = int(np.ceil((b - origin[k]) / L)) - j0 + 1   # ... to the first at or above b
+            if nsk[k] > ns:
+                nsk[k] = ns
+                bad = p
             closed = lp <= 0.5 * L and a == x[p, k] - lp and b == x[p, k] + lp
             inv_w = 1.0 / (b - a)
             inv_Ll = 1.0 / (L * lp) if closed else 0.0
-            for q in range(ns):
+            for q in range(nsk[k]):
                 j = j0 + q
                 jl = j - ilo[k]
                 off[k, q] = jl * stride if 0 <= jl < nlat[k] else -1
@@ -192,7 +197,7 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
                 Sk[k, q] = S
                 dSk[k, q] = dS
             stride *= nlat[k]
-        if tensor_product(d, ns, Sk, dSk, off, table, p, False,
+        if tensor_product(d, nsk, Sk, dSk, off, table, p, False,
                           nodes_out, N_out, dN_out, count_out):
             bad = p
     return bad
@@ -217,8 +222,9 @@ def gimp_shape(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, tab
     half-widths are min(lp0_k |F_kk|, L_k) (cpGIMP), else lp0 (uGIMP). origin/spacing: global lattice
     origin and cell size per axis; lo/hi: the grid's extent (boxes are clipped to it);
     table: local node index of lattice point ilo + j (j < nlat, flat, axis 0 fastest), or
-    -1 where the point is not a local node. ns: nodes per axis looked at, ceil(2 l / L) + 2,
-    enough for any box of half-width l.
+    -1 where the point is not a local node. ns: at least the lattice nodes any box touches
+    per axis, ceil(2 l / L) + 2 for the widest box l (a particle looks at the nodes from the
+    last one at or below its box's lower end to the first one at or above its upper end).
     Output per particle: the nonzero-weight nodes first (count_out of them), then padding
     (a valid node with N = dN = 0); a particle with more nonzero-weight nodes than the
     outputs have columns gets only the first ones written (count_out says how many it has:
@@ -361,9 +367,11 @@ class GimpShape(LatticeShape):
         self._init_buffers()
 
     def _window(self, sim):
+        """ns of gimp_shape: cpGIMP boxes are at most a cell wide each side (half_width),
+        so 4 without a pass over the particles; uGIMP from the widest initial box."""
         p = sim.particles
-        ratio = (max_half_width(p.gimp_l0, p.F, self.lat["spacing"], self.contiguous)
-                 if len(p) else 0.5)
+        ratio = 1.0 if self.contiguous or not len(p) else float(
+            (p.gimp_l0 / self.lat["spacing"]).max())
         return int(np.ceil(2.0 * ratio)) + 2
 
     def _kernel(self, sim, ns, nodes, N, dN, count):
