@@ -304,12 +304,13 @@ class PaddedStencil:
         self._buf = None
         self._nv = 0            # the node columns of the last evaluation (0: none yet)
 
-    def _fill(self, n, d, width, kernel):
+    def _fill(self, n, d, width, kernel, first=None):
         """kernel(nodes, N, dN, count) -> bad writes n padded rows (at most nodes.shape[1]
         nodes each, count[p] = how many particle p has); columns: the last step's node count
-        (usually still right), at most `width`. Returns ((nodes, N, dN) cut to the largest
-        count, bad)."""
-        cap = min(self._nv, width) if self._nv else width
+        (usually still right), at most `width` (`first`, if given, on the first call: a
+        guess that spares the full width's buffers). Returns ((nodes, N, dN) cut to the
+        largest count, bad)."""
+        cap = min(self._nv or first or width, width)
         for _ in range(2):
             if self._buf is None or self._buf[0].shape != (n, cap):
                 self._buf = (np.empty((n, cap), dtype=np.int32), np.empty((n, cap)),
@@ -341,7 +342,8 @@ class LatticeShape(PaddedStencil):
         ns = self._window(sim)
         out, bad = self._fill(len(p), d, ns ** d,
                               lambda nodes, N, dN, count: self._kernel(sim, ns, nodes, N, dN,
-                                                                       count))
+                                                                       count),
+                              first=(ns - 1) ** d)
         if bad >= 0:
             raise RuntimeError(f"{self.name}: the domain of particle {int(p.id[bad])} at "
                                f"{np.round(p.x[bad], 6).tolist()} reaches grid nodes that are "
