@@ -307,9 +307,10 @@ class PaddedStencil:
     def _fill(self, n, d, width, kernel, first=None):
         """kernel(nodes, N, dN, count) -> bad writes n padded rows (at most nodes.shape[1]
         nodes each, count[p] = how many particle p has); columns: the last step's node count
-        (usually still right), at most `width` (`first`, if given, on the first call: a
-        guess that spares the full width's buffers). Returns ((nodes, N, dN) cut to the
-        largest count, bad)."""
+        (usually still right; `first`, if given, on the first call), at most `width`; when a
+        particle has more nodes, once more with exactly as many columns as the largest count
+        (the kernel counts past its columns). Returns ((nodes, N, dN) cut to the largest
+        count, bad)."""
         cap = min(self._nv or first or width, width)
         for _ in range(2):
             if self._buf is None or self._buf[0].shape != (n, cap):
@@ -320,7 +321,7 @@ class PaddedStencil:
             nv = max(int(count.max()) if n else 1, 1)
             if nv <= cap:
                 break
-            cap = width                  # a particle touches more nodes than last step
+            cap = min(nv, width)         # a particle touches more nodes than last step
         self._nv = nv
         if nv == cap:
             return (nodes, N, dN), bad
