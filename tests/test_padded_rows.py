@@ -12,6 +12,8 @@ its last node with N = dN = 0, and the particle passes stop at that padding.
 - The P2G, internal-force and G2P passes that stop at row_length give the same nodal mass,
   momentum, force and particle updates as a dense numpy evaluation over every column
   (1e-12 relative).
+- Rows that grow (particles moved off the fill positions after an evaluation there) are
+  evaluated again with as many columns as the longest row and equal a fresh evaluation.
 Serial and on 2 ranks."""
 import numpy as np
 import pytest
@@ -95,3 +97,32 @@ def test_passes_that_stop_at_the_padding_equal_dense_sums(shape, cell_type, rng)
     errs = dict(mass=rel(m, m_ref), momentum=rel(mv, mv_ref), force=rel(f, f_ref),
                 dF=rel(dF[:, :2, :2] - np.eye(2), dF_ref), x=rel(x, x_ref))
     assert max(errs.values()) < 1e-12, errs
+
+
+@pytest.mark.parametrize("shape,cell_type", [("cpgimp", QUAD), ("ugimp", QUAD),
+                                             ("bspline2", QUAD), ("cpdi1", TRI)],
+                         ids=lambda c: getattr(c, "name", c))
+def test_rows_that_grow_are_evaluated_again_at_their_width(shape, cell_type):
+    """A family keeps last step's columns (4 at the fill positions for cpGIMP); when particles
+    then touch more nodes, the rows are evaluated again with exactly as many columns as the
+    longest row (gimp.PaddedStencil._fill), and equal those of a fresh evaluation."""
+    def scene(first_at_fill):
+        msh = mesh.create_rectangle(comm, [[-0.5, -0.5], [1.5, 1.5]], [16, 16], cell_type)
+        grid = fm.Grid(msh)
+        p = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2,
+                              region=lambda x: (np.abs(x[:, 0] - 0.5) < 0.5)
+                              & (np.abs(x[:, 1] - 0.5) < 0.5))
+        sim = fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape=shape)
+        if first_at_fill:
+            sim.locate_and_shape()
+        rng = np.random.default_rng(7 + comm.rank)
+        p.x[:] += rng.uniform(-0.3, 0.3, p.x.shape) * (2.0 / 16)
+        sim.locate_and_shape()
+        return sim
+    grown, fresh = scene(True), scene(False)
+    n, nv = grown.nodes.shape
+    longest = max((kt.row_length(grown.nodes, q) for q in range(n)), default=1)
+    assert nv == max(longest, 1)
+    assert grown.nodes.shape == fresh.nodes.shape
+    assert np.array_equal(grown.nodes, fresh.nodes)
+    assert np.array_equal(grown.N, fresh.N) and np.array_equal(grown.dN, fresh.dN)
