@@ -106,8 +106,9 @@ def test_rows_that_grow_are_evaluated_again_at_their_width(shape, cell_type):
     """A family keeps last step's columns (4 at the fill positions for cpGIMP); when particles
     then touch more nodes, the rows are evaluated again with exactly as many columns as the
     longest row (gimp.PaddedStencil._fill), and equal those of a fresh evaluation."""
-    def scene(first_at_fill):
-        msh = mesh.create_rectangle(comm, [[-0.5, -0.5], [1.5, 1.5]], [16, 16], cell_type)
+    msh = mesh.create_rectangle(comm, [[-0.5, -0.5], [1.5, 1.5]], [16, 16], cell_type)
+
+    def scene(first_at_fill):                  # one mesh: one partition for both scenes
         grid = fm.Grid(msh)
         p = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2,
                               region=lambda x: (np.abs(x[:, 0] - 0.5) < 0.5)
@@ -115,8 +116,8 @@ def test_rows_that_grow_are_evaluated_again_at_their_width(shape, cell_type):
         sim = fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape=shape)
         if first_at_fill:
             sim.locate_and_shape()
-        rng = np.random.default_rng(7 + comm.rank)
-        p.x[:] += rng.uniform(-0.3, 0.3, p.x.shape) * (2.0 / 16)
+        shift = np.random.default_rng(7).uniform(-0.3, 0.3, (p.n_global(), 2)) * (2.0 / 16)
+        p.x[:] += shift[p.id]                  # by particle id: the same on any partition
         sim.locate_and_shape()
         return sim
     grown, fresh = scene(True), scene(False)
