@@ -32,15 +32,24 @@ CASES = [("cpgimp", QUAD, True), ("ugimp", QUAD, True), ("bspline2", QUAD, False
          ("cpdi1", TRI, True), ("cpdi2", TRI, True)]
 
 
-def _moved(shape, cell_type, rng):
-    """A 1 x 1 elastic block on 8 x 8 cells, 2 x 2 particles per cell, after the particles
-    moved by up to 0.3 cells (and F stretched up to 10 %): rows of every length."""
-    msh = mesh.create_rectangle(comm, [[-0.5, -0.5], [1.5, 1.5]], [16, 16], cell_type)
+def _mesh(cell_type):
+    return mesh.create_rectangle(comm, [[-0.5, -0.5], [1.5, 1.5]], [16, 16], cell_type)
+
+
+def _block(shape, msh):
+    """A 1 x 1 elastic block on 8 x 8 cells of msh (h = 1/8), 2 x 2 particles per cell."""
     grid = fm.Grid(msh)
     p = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2,
                           region=lambda x: (np.abs(x[:, 0] - 0.5) < 0.5)
                           & (np.abs(x[:, 1] - 0.5) < 0.5))
-    sim = fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape=shape)
+    return fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape=shape)
+
+
+def _moved(shape, cell_type, rng):
+    """_block after the particles moved by up to 0.3 cells (and F stretched up to 10 %):
+    rows of every length."""
+    sim = _block(shape, _mesh(cell_type))
+    p = sim.particles
     h = 2.0 / 16
     p.x[:] += rng.uniform(-0.3, 0.3, p.x.shape) * h
     p.F[:, 0, 0] *= rng.uniform(0.95, 1.1, len(p))
@@ -106,14 +115,11 @@ def test_rows_that_grow_are_evaluated_again_at_their_width(shape, cell_type):
     """A family keeps last step's columns (4 at the fill positions for cpGIMP); when particles
     then touch more nodes, the rows are evaluated again with exactly as many columns as the
     longest row (gimp.PaddedStencil._fill), and equal those of a fresh evaluation."""
-    msh = mesh.create_rectangle(comm, [[-0.5, -0.5], [1.5, 1.5]], [16, 16], cell_type)
+    msh = _mesh(cell_type)
 
     def scene(first_at_fill):                  # one mesh: one partition for both scenes
-        grid = fm.Grid(msh)
-        p = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2,
-                              region=lambda x: (np.abs(x[:, 0] - 0.5) < 0.5)
-                              & (np.abs(x[:, 1] - 0.5) < 0.5))
-        sim = fm.Simulation(grid, p, fm.Explicit(), dt=1e-4, shape=shape)
+        sim = _block(shape, msh)
+        p = sim.particles
         if first_at_fill:
             sim.locate_and_shape()
         shift = np.random.default_rng(7).uniform(-0.3, 0.3, (p.n_global(), 2)) * (2.0 / 16)
