@@ -842,6 +842,7 @@ class ExplicitContact:
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
+        moved = (body, self._is_rigid, dt * vr, dt * v1)  # what each body's particles moved by
         if self.scheme in ("MUSL", "AVG"):
             mv2 = np.zeros((nn, nb, d))
             p2g_weighted_bodies(D, sim.nodes, sim.N, body, p.mass, p.v, mv2)
@@ -875,6 +876,7 @@ class ExplicitContact:
         vcm = np.einsum("ib,ibk->ik", m_b, v1) * inv_m[:, None]
         if sim.robin is not None:
             sim.robin_u += dt * vcm
-        sim.nodal = dict(mass=m, velocity=vcm, active=active, body_mass=m_b, body_velocity=v1)
+        sim.nodal = dict(mass=m, velocity=vcm, active=active, body_mass=m_b, body_velocity=v1,
+                         body_displacement=moved)
         np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
         p.a /= dt

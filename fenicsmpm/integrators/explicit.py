@@ -232,6 +232,7 @@ class Explicit:
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
+        du = dt * v1                                # what the particles moved by (CPDI2 corners)
         if remap:
             if mv2 is None:
                 _, mv2 = self._p2g(sim, p.v, x_start, False)
@@ -245,6 +246,6 @@ class Explicit:
             sim.stress_update(v1, dt if self.scheme != "AVG" else 0.5 * dt)
         if sim.robin is not None:
             sim.robin_u += dt * v1
-        sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction)
+        sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction, displacement=du)
         np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
         p.a /= dt

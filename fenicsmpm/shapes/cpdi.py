@@ -473,6 +473,23 @@ def move_corners(D, cnodes, cN, du, corners):
         _move_corners(D, cnodes, cN, du, corners, lo, hi)
 
 
+@njit(cache=True)
+def move_corners_bodies(D, cnodes, cN, body, rigid, du_rigid, du, corners):
+    """move_corners with each particle's own body's nodal displacement du (n_nodes, bodies,
+    gdim) (contact.multi_velocity); corners of rigid bodies move by du_rigid[b], as their
+    particles do."""
+    d = len(D)
+    for p in range(corners.shape[0]):
+        b = body[p]
+        for c in range(corners.shape[1]):
+            for k in range(d):
+                if rigid[b]:
+                    corners[p, c, k] += du_rigid[b, k]
+                    continue
+                for a in range(cnodes.shape[2]):
+                    corners[p, c, k] += cN[p, c, a] * du[cnodes[p, c, a], b, k]
+
+
 def initial_edges(grid, particles):
     """CPDI1 edge vectors r_k^0 (n, d, d) of volume V0_p: on quadrilaterals/hexahedra the
     particle's cell edges e_k = x_(vertex 2^k) - x_(vertex 0) scaled by (V0_p / |det e|)^(1/d)
@@ -563,16 +580,22 @@ class CpdiShape(PaddedStencil):
     def after_step(self, sim, dt):
         """CPDI2: move the corners with the step's grid displacement u_i, x_c += sum_i S_i(x_c)
         u_i, with the corner shape functions of that step (particles not yet migrated): the
-        increment the particles moved by, sim.nodal["displacement"] where the integrator
-        leaves it (Newmark, generalized-alpha, quasi-static), else dt v_i (explicit). Called
-        by Simulation once a step of dt is accepted, so a checkpoint holds the moved corners,
-        a changed or halved dt moves them by the step's own dt, and shapes evaluated between
-        steps (output, probes) do not move them again."""
+        increment the particles moved by, which every integrator leaves in
+        sim.nodal["displacement"] (explicit MUSL/AVG: dt times the updated grid velocity, not
+        the remapped one the stress sees), or per body in sim.nodal["body_displacement"]
+        (fm.ExplicitContact: each particle's own body's field; rigid bodies their prescribed
+        motion). Called by Simulation once a step of dt is accepted, so a checkpoint holds the
+        moved corners, a changed or halved dt moves them by the step's own dt, and shapes
+        evaluated between steps (output, probes) do not move them again."""
         cs, self._corner_shape = self._corner_shape, None
-        if self.version == 2 and cs is not None and "velocity" in sim.nodal:
-            du = sim.nodal.get("displacement")
-            move_corners(sim.grid.D, cs[0], cs[1], dt * sim.nodal["velocity"] if du is None
-                         else du, sim.particles.cpdi_corners)
+        if self.version != 2 or cs is None:
+            return
+        corners = sim.particles.cpdi_corners
+        if "body_displacement" in sim.nodal:
+            body, rigid, du_rigid, du = sim.nodal["body_displacement"]
+            move_corners_bodies(sim.grid.D, cs[0], cs[1], body, rigid, du_rigid, du, corners)
+        else:
+            move_corners(sim.grid.D, cs[0], cs[1], sim.nodal["displacement"], corners)
 
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
