@@ -183,4 +183,4 @@ def test_stretched_cpgimp_widens_the_pattern_to_three_rings_at_most():
         sys = sim.integrator.system
         assert sys.rings == 3 and sys.switched == switched
         assert sys.fallback != switched
-        assert (sys.ksp.getType() == "preonly") == switched, sys.ksp.getType()
+        assert (sys.ksp.getPC().getType() == "lu") == switched, sys.ksp.getPC().getType()

@@ -14,7 +14,8 @@ Runs (full size / --quick):
   implicit Newmark, standard family (full size only), with the default KSP and with the
       direct LU (the defaults before issue 15)
   quasi-static (full size only): the same block, gravity ramped over the warm-up and measured
-      steps (each step loads), default KSP (LU), with shape="auto" (cpGIMP) and "mpm"
+      steps (each step loads), default KSP (GMRES + lagged LU), with shape="auto" (cpGIMP)
+      and "mpm"
 The warm-up absorbs numba compilation and first-call set-up; sim.timers are zeroed after it.
 These runs use the process's numba threads (NUMBA_NUM_THREADS; config "threads").
 
@@ -72,8 +73,8 @@ FULL = [
     dict(name="implicit-Newmark-mpm-lu", integrator="Newmark", scheme="Newmark", cells=164,
          per_cell=2, steps=3, warmup=1, dt_factor=5.0,
          petsc_options={"ksp_type": "preonly", "pc_type": "lu"}, prefix="fenicsmpm_bench_lu_"),
-    # quasi-static (default KSP: LU), gravity ramped over the 4 steps: the default shape
-    # (cpGIMP) and the standard family
+    # quasi-static (default KSP: GMRES + lagged LU), gravity ramped over the 4 steps: the
+    # default shape (cpGIMP) and the standard family
     dict(name="implicit-QuasiStatic", integrator="QuasiStatic", scheme="QuasiStatic",
          cells=164, per_cell=2, steps=3, warmup=1, shape="auto"),
     dict(name="implicit-QuasiStatic-mpm", integrator="QuasiStatic", scheme="QuasiStatic",

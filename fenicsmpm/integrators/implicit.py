@@ -56,7 +56,7 @@ class _NotConverged(RuntimeError):
 class _Newton:
     explicit = False
     DIVERGED = 1e3                    # Newton stops once |R| exceeds this times its initial value
-    iterative_default = False         # default KSP: direct LU (LinearSystem)
+    iterative_default = False         # default KSP: GMRES + lagged LU (LinearSystem)
     reports_reaction = True             # sim.nodal["reaction"] after each step
 
     def __init__(self, rtol=1e-8, utol=1e-10, max_iter=25, flip=1.0, petsc_options=None,

@@ -22,9 +22,20 @@ DEFAULT_PREFIX = "fenicsmpm_"
 ITERATIVE = {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10, "ksp_max_it": 1000}
 
 
-def _direct(comm):
-    """The direct default: LU (MUMPS on several ranks)."""
-    return dict({"ksp_type": "preonly", "pc_type": "lu"},
+# the quasi-static default (LinearSystem iterative=False): the LU factorization of the step's
+# first tangent (solved with it alone), kept as GMRES's preconditioner for its further Newton
+# iterations: computed again once the solves since took more than LAG_ITERATIONS GMRES
+# iterations in all, or when GMRES fails with it (at ksp_max_it); the true residual to 1e-12
+# (a near-singular tangent, a footing near collapse, needs a solve as accurate as LU's)
+LAG_ITERATIONS = 30
+LAGGED = {"ksp_type": "gmres", "pc_type": "lu", "ksp_pc_side": "right", "ksp_rtol": 1e-12,
+          "ksp_max_it": LAG_ITERATIONS // 2}
+
+
+def _direct(comm, lagged=False):
+    """The direct default: LU (MUMPS on several ranks), as GMRES's lagged preconditioner
+    (LAGGED) or applied once (preonly)."""
+    return dict(LAGGED if lagged else {"ksp_type": "preonly", "pc_type": "lu"},
                 **({"pc_factor_mat_solver_type": "mumps"} if comm.size > 1 else {}))
 
 
@@ -48,8 +59,9 @@ class LinearSystem:
     are that local pattern. rings = 1 ("mpm") keeps the cell pattern above, unchanged.
 
     Solver options: PETSc options under `prefix` (default "fenicsmpm_"), e.g.
-    `-fenicsmpm_ksp_type cg -fenicsmpm_pc_type gamg`, or the `petsc_options` dict. The default
-    is a direct LU (MUMPS on several ranks); iterative=True (the dynamic integrators' default,
+    `-fenicsmpm_ksp_type gmres -fenicsmpm_pc_type hypre`, or the `petsc_options` dict. The
+    default is GMRES preconditioned by an LU factorization kept between solves (LAGGED,
+    _solve_lagged; MUMPS on several ranks); iterative=True (the dynamic integrators' default,
     used only when neither the dict nor the command line sets an option under `prefix`) starts
     with ITERATIVE and switches to that LU for good, logged once, the first time the KSP
     fails, re-solving the same system."""
@@ -92,10 +104,14 @@ class LinearSystem:
         opts = PETSc.Options()
         _insert_command_line_options(prefix)
         self.prefix = prefix
-        self.fallback = bool(iterative) and not petsc_options and not any(
-            k.startswith(prefix) for k in opts.getAll())
+        defaults = not petsc_options and not any(k.startswith(prefix) for k in opts.getAll())
+        self.fallback = bool(iterative) and defaults
         self.switched = False             # the iterative default failed and LU took over
-        merged = dict(ITERATIVE) if self.fallback else _direct(grid.comm)
+        self.lagged = not iterative and defaults    # LAGGED: the LU is kept between solves
+        self.factorizations = 0           # LU factorizations computed (lagged only)
+        self._factored = False
+        self._since = 0                   # GMRES iterations since the last factorization
+        merged = dict(ITERATIVE) if self.fallback else _direct(grid.comm, self.lagged)
         merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
         merged.update(petsc_options or {})
         saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
@@ -117,7 +133,9 @@ class LinearSystem:
         """Scatter plan of the current particle-node connectivity (once per step). With the
         wide pattern (rings > 1) a node pair outside it raises OutsidePattern (a RuntimeError)
         on every rank (collective), never a dropped or misplaced term. The rows of particles
-        whose nodes have not changed since the last call are kept (kt.stiffness_plan)."""
+        whose nodes have not changed since the last call are kept (kt.stiffness_plan). A new
+        step's first solve computes fresh LU factors (lagged default, _solve_lagged)."""
+        self._factored = False
         shape = nodes.shape + (nodes.shape[1],)
         last = self._last_plan
         if last is not None and last[1].shape == shape:
@@ -193,14 +211,12 @@ class LinearSystem:
             self.b.x.array[tie.slave_dofs(self.bs)] = 0.0
             self.ksp.setOperators(tie.reduce(self.A))
         self.b.x.scatter_forward()
-        self.ksp.solve(self.b.vector, self.x.vector)
-        reason = self.ksp.getConvergedReason()
-        self.iterations = self.ksp.getIterationNumber()
+        reason = self._solve_lagged() if self.lagged else self._solve_once()
         if reason < 0 and self.fallback:           # the iterative default failed: LU from now on
+            its = self.iterations
             self._use_direct(reason)
-            self.ksp.solve(self.b.vector, self.x.vector)
-            reason = self.ksp.getConvergedReason()
-            self.iterations += self.ksp.getIterationNumber()
+            reason = self._solve_once()
+            self.iterations += its
         if tie is not None:
             tie.expand(self.x.vector.copy(), self.x.vector)
         if reason < 0:
@@ -208,6 +224,40 @@ class LinearSystem:
                                f"({_reason_name(reason)}) after {self.iterations} iterations")
         self.x.x.scatter_forward()
         return self.x.x.array.reshape(R.shape).copy()
+
+    def _solve_once(self):
+        """One KSP solve of b into x: the converged reason (iterations in self.iterations)."""
+        self.ksp.solve(self.b.vector, self.x.vector)
+        self.iterations = self.ksp.getIterationNumber()
+        return self.ksp.getConvergedReason()
+
+    def _solve_lagged(self):
+        """The lagged default (LAGGED): fresh LU factors solve alone (preonly) at a step's
+        first solve (plan), for the next solve once the solves since the last factorization
+        took more than LAG_ITERATIONS iterations in all, and at once, the solve repeated, when
+        GMRES fails with the old factors; otherwise GMRES (right-preconditioned: the true
+        residual to rtol 1e-12) with the kept factors as its preconditioner. Deterministic:
+        the same run factors at the same solves. Measured: docs/guide/integrators.md."""
+        fresh = not self._factored
+        reason = self._lagged_once(fresh)
+        if reason < 0 and not fresh:               # the old factors no longer serve
+            its = self.iterations
+            reason = self._lagged_once(True)
+            self.iterations += its
+            fresh = True
+        self.factorizations += fresh
+        self._factored = True
+        self._since = 0 if fresh else self._since + self.iterations
+        if self._since > LAG_ITERATIONS:
+            self._factored = False
+        return reason
+
+    def _lagged_once(self, fresh):
+        """One solve of the lagged default: with fresh factors the LU solve alone (preonly,
+        as an exact direct solve), else GMRES preconditioned by the kept factors."""
+        self.ksp.setType("preonly" if fresh else "gmres")
+        self.ksp.getPC().setReusePreconditioner(not fresh)
+        return self._solve_once()
 
     def _use_direct(self, reason):
         """Switch the KSP to the direct default (collective: the converged reason is global)."""
