@@ -18,7 +18,7 @@ export OMPI_MCA_btl_vader_single_copy_mechanism = none
 # signatures of one function at once; the two MPI ranks add the same ones).
 export NUMBA_CACHE_DIR = $(CURDIR)/.numba-cache
 
-.PHONY: all deps deps-optional venv test test-serial test-mpi docs demo bench clean
+.PHONY: all deps deps-optional venv test test-serial test-mpi test-partitions docs demo bench clean
 
 all: test
 
@@ -67,6 +67,13 @@ test-serial: $(VENV)/.installed deps-optional
 
 test-mpi: $(VENV)/.installed
 	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
+
+# The 2-rank pass on SCOTCH partitions of several seeds (tests/conftest.py): finds the tests
+# that pass on one partition of dolfinx's default partitioner and fail on another.
+SEEDS ?= 1 2 3
+test-partitions: $(VENV)/.installed
+	for s in $(SEEDS); do echo "[make] partition seed $$s"; \
+	  FENICSMPM_TEST_PARTITION_SEED=$$s timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests || exit 1; done
 
 # The documentation site (docs/): warnings are errors; HTML in docs/_build/html.
 docs: $(VENV)/.installed
