@@ -451,35 +451,9 @@ def cpdi_combine(D, cnodes, cN, w, g, nodes_out, N_out, dN_out, count_out):
 
 
 @njit(cache=True)
-def _move_corners(D, cnodes, cN, du, corners, lo, hi):
+def _move_corners(D, cnodes, cN, body, rigid, du_rigid, du, corners, lo, hi):
     d = len(D)
     for p in range(lo, hi):
-        for c in range(corners.shape[1]):
-            for a in range(cnodes.shape[2]):
-                i = cnodes[p, c, a]
-                for k in range(d):
-                    corners[p, c, k] += cN[p, c, a] * du[i, k]
-
-
-@njit(parallel=PRANGE, cache=True)
-def move_corners(D, cnodes, cN, du, corners):
-    """CPDI2 corner update x_c += sum_i S_i(x_c) du_i (du: the step's nodal displacement)."""
-    n = corners.shape[0]
-    nc = particle_chunks(n)
-    if nc == 1:
-        return _move_corners(D, cnodes, cN, du, corners, np.int64(0), n)
-    for c in prange(nc):
-        lo, hi = chunk(n, nc, c)
-        _move_corners(D, cnodes, cN, du, corners, lo, hi)
-
-
-@njit(cache=True)
-def move_corners_bodies(D, cnodes, cN, body, rigid, du_rigid, du, corners):
-    """move_corners with each particle's own body's nodal displacement du (n_nodes, bodies,
-    gdim) (contact.multi_velocity); corners of rigid bodies move by du_rigid[b], as their
-    particles do."""
-    d = len(D)
-    for p in range(corners.shape[0]):
         b = body[p]
         for c in range(corners.shape[1]):
             for k in range(d):
@@ -488,6 +462,21 @@ def move_corners_bodies(D, cnodes, cN, body, rigid, du_rigid, du, corners):
                     continue
                 for a in range(cnodes.shape[2]):
                     corners[p, c, k] += cN[p, c, a] * du[cnodes[p, c, a], b, k]
+
+
+@njit(parallel=PRANGE, cache=True)
+def move_corners(D, cnodes, cN, body, rigid, du_rigid, du, corners):
+    """CPDI2 corner update x_c += sum_i S_i(x_c) du_i[b] with the step's nodal displacement
+    du (n_nodes, bodies, gdim) of the particle's body b = body[p] (one body: all zeros;
+    contact.multi_velocity: each its own field); corners of rigid bodies (rigid[b]) move by
+    du_rigid[b], as their particles do."""
+    n = corners.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        return _move_corners(D, cnodes, cN, body, rigid, du_rigid, du, corners, np.int64(0), n)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _move_corners(D, cnodes, cN, body, rigid, du_rigid, du, corners, lo, hi)
 
 
 def initial_edges(grid, particles):
@@ -593,9 +582,11 @@ class CpdiShape(PaddedStencil):
         corners = sim.particles.cpdi_corners
         if "body_displacement" in sim.nodal:
             body, rigid, du_rigid, du = sim.nodal["body_displacement"]
-            move_corners_bodies(sim.grid.D, cs[0], cs[1], body, rigid, du_rigid, du, corners)
-        else:
-            move_corners(sim.grid.D, cs[0], cs[1], sim.nodal["displacement"], corners)
+        else:                                        # one body
+            du = sim.nodal["displacement"][:, None, :]
+            body, rigid = np.zeros(len(corners), dtype=np.int32), np.zeros(1, dtype=np.bool_)
+            du_rigid = np.zeros((1, du.shape[2]))
+        move_corners(sim.grid.D, cs[0], cs[1], body, rigid, du_rigid, du, corners)
 
     def evaluate(self, sim):
         """(nodes, N, dN) of the local particles; nv = the largest number of distinct nodes a
