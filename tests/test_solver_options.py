@@ -15,7 +15,7 @@ def _ksp(sim):
 
 def test_defaults_and_options_do_not_leak():
     """Newmark (dynamic) defaults to GMRES + block Jacobi, QuasiStatic to GMRES preconditioned
-    by a lagged LU factorization."""
+    by a lagged LU factorization (MUMPS on several ranks or from MUMPS_FROM_DOFS dofs on)."""
     sim, _ = vibrating_bar(fm.Newmark(petsc_options={"ksp_type": "cg", "pc_type": "jacobi"}))
     assert _ksp(sim) == ("cg", "jacobi")
     assert not sim.integrator.system.fallback, "options given: no switch to LU"
@@ -24,6 +24,9 @@ def test_defaults_and_options_do_not_leak():
     assert sim2.integrator.system.fallback
     sim3, _ = vibrating_bar(fm.QuasiStatic())
     assert _ksp(sim3) == ("gmres", "lu") and sim3.integrator.system.lagged
+    sim3.run(steps=1)
+    assert (sim3.integrator.system.ksp.getPC().getFactorSolverType() == "mumps") == \
+        (fm_size() > 1), "a 1D bar's few dofs: PETSc's own LU serially"
 
 
 def test_failed_iterative_default_switches_to_lu(monkeypatch, caplog):
@@ -51,14 +54,19 @@ def fm_size():
     return MPI.COMM_WORLD.size
 
 
-def test_quasi_static_keeps_its_lu_factors():
+@pytest.mark.parametrize("mumps_from", [0, None])
+def test_quasi_static_keeps_its_lu_factors(monkeypatch, mumps_from):
     """QuasiStatic's default KSP (the LU factors of a step's first tangent kept as GMRES's
     preconditioner for its further Newton iterations, LinearSystem._solve_lagged) factors
     fewer times than it solves (measured: 6 factorizations in 12 solves, serial) and gives
     the displacements of an LU solve at every Newton iteration to 1e-10 relative (measured
     8.9e-15), with the same Newton iterations: gravity ramped over 6 load steps on bench
-    throughput's block, 24 x 24 cells, cpGIMP."""
+    throughput's block, 24 x 24 cells, cpGIMP. mumps_from = 0: the default factors with MUMPS
+    also serially (as from MUMPS_FROM_DOFS dofs on), the reference stays PETSc's own LU."""
     from fenicsmpm.bench import throughput as T
+    from fenicsmpm.integrators import linear_system
+    if mumps_from is not None:
+        monkeypatch.setattr(linear_system, "MUMPS_FROM_DOFS", mumps_from)
     lu = {"ksp_type": "preonly", "pc_type": "lu",
           **({"pc_factor_mat_solver_type": "mumps"} if fm_size() > 1 else {})}
     res, newton = [], []
@@ -71,6 +79,9 @@ def test_quasi_static_keeps_its_lu_factors():
             sim.step()
         system = sim.integrator.system
         assert system.lagged == (opts is None)
+        if opts is None:
+            assert (system.ksp.getPC().getFactorSolverType() == "mumps") == \
+                (fm_size() > 1 or mumps_from == 0)
         if opts is None:
             assert 1 <= system.factorizations < sum(sim.integrator.iterations), \
                 (system.factorizations, sim.integrator.iterations)
@@ -132,3 +143,25 @@ def test_ksp_failure_names_step_time_and_reason():
     with pytest.raises(RuntimeError, match=r"step 0, t = 0, Newton iteration 0: KSP failed: "
                                            r"converged reason -3 \(DIVERGED_MAX_IT\) after 1 iterations"):
         sim.step()
+
+
+@pytest.mark.skipif(fm_size() > 1, reason="PETSc's ILU is sequential (one rank)")
+def test_user_ilu_does_not_inherit_the_lu_solver_type(monkeypatch):
+    """The direct default's MUMPS (from MUMPS_FROM_DOFS dofs) applies to LU only: a user's
+    ILU on a system that large solves with PETSc's ILU, and gives the displacements of the
+    default solve to 1e-8 relative (GMRES to rtol 1e-12)."""
+    from fenicsmpm.bench import throughput as T
+    from fenicsmpm.integrators import linear_system
+    monkeypatch.setattr(linear_system, "MUMPS_FROM_DOFS", 0)
+    u = []
+    for opts in (None, {"ksp_type": "gmres", "pc_type": "ilu", "ksp_rtol": 1e-12}):
+        spec = dict(name="ilu", integrator="QuasiStatic", scheme="QuasiStatic", cells=12,
+                    per_cell=2, steps=1, warmup=0, shape=None,
+                    **({"petsc_options": opts, "prefix": "test_ilu_"} if opts else {}))
+        sim = T.build_scene(T.scene_config(spec))
+        sim.step()
+        pc = sim.integrator.system.ksp.getPC()
+        assert (pc.getType(), pc.getFactorSolverType()) == \
+            (("lu", "mumps") if opts is None else ("ilu", "petsc"))
+        u.append(sim.particles.u.copy())
+    assert np.max(np.abs(u[0] - u[1])) <= 1e-8 * np.max(np.abs(u[0]))

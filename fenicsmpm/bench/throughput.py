@@ -43,6 +43,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import time
 
 import numpy as np
 
@@ -268,6 +269,45 @@ def run_threads(quick=False, scale=1.0, threads=THREADS, verbose=True, timeout=N
                     r["metrics"]["speedup_over_1_thread"] = by[r["threads"]] / by[1]
     return dict(runs=runs, speedup=speedup, command=f"NUMBA_NUM_THREADS=N {sys.executable} -m "
                 f"fenicsmpm.bench.throughput --thread-worker SPEC RESULT")
+
+
+def lu_times(cells=(24, 48, 96, 164), shapes=("auto", None), solvers=("petsc", "mumps"),
+             repeats=3, comm=None):
+    """The direct solvers on the quasi-static block's tangent (linear_system.MUMPS_FROM_DOFS):
+    for each grid size and shape family, after one load step, the fastest of `repeats`
+    numeric refactorizations plus a solve per LU solver type. Returns rows (cells, shape,
+    dofs, {solver: seconds}); serial (MUMPS runs on one rank here)."""
+    from petsc4py import PETSc
+    rows = []
+    for n in cells:
+        for shape in shapes:
+            sim = build_scene(scene_config(dict(name="lu", integrator="QuasiStatic",
+                                                scheme="QuasiStatic", cells=n, per_cell=2,
+                                                steps=1, warmup=0, shape=shape)), comm)
+            sim.run(steps=1)
+            A = sim.integrator.system.A
+            times = {}
+            for solver in solvers:
+                ksp = PETSc.KSP().create(A.getComm())
+                ksp.setOperators(A)
+                ksp.setType("preonly")
+                ksp.getPC().setType("lu")
+                ksp.getPC().setFactorSolverType(solver)
+                b = A.createVecLeft()
+                b.set(1.0)
+                x = b.duplicate()
+                ksp.setUp()                   # the symbolic factorization, done once a run
+                best = np.inf
+                for k in range(repeats):
+                    A.scale(2.0 if k % 2 else 0.5)    # new values: a numeric refactorization
+                    t0 = time.perf_counter()
+                    ksp.setUp()
+                    ksp.solve(b, x)
+                    best = min(best, time.perf_counter() - t0)
+                times[solver] = best
+                ksp.destroy()
+            rows.append((n, sim.shape, A.getSize()[0], times))
+    return rows
 
 
 def _thread_worker(spec_path, result_path):

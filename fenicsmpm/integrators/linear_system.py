@@ -32,11 +32,22 @@ LAGGED = {"ksp_type": "gmres", "pc_type": "lu", "ksp_pc_side": "right", "ksp_rto
           "ksp_max_it": LAG_ITERATIONS // 2}
 
 
-def _direct(comm, lagged=False):
-    """The direct default: LU (MUMPS on several ranks), as GMRES's lagged preconditioner
-    (LAGGED) or applied once (preonly)."""
+# MUMPS for the direct default from this many global dofs on (always on several ranks), with
+# the optimised serial BLAS `make deps` installs (libopenblas0-serial); PETSc's own LU below.
+# Measured (fenicsmpm.bench.throughput.lu_times, 2026-12-05: a refactorization plus a solve of
+# the quasi-static block's cpGIMP tangent, PETSc's LU / MUMPS): 1,250 dofs 2.3 / 5.4 ms,
+# 4,802 dofs 28.5 / 21.5 ms, 18,818 dofs 0.25 / 0.13 s, 54,450 dofs 1.44 / 0.62 s; with
+# Debian's reference BLAS MUMPS was slower than PETSc's LU (a quasi-static step 4.1 / 3.4 s)
+MUMPS_FROM_DOFS = 4000
+
+
+def _direct(comm, n_dofs, lagged=False):
+    """The direct default for a system of n_dofs global dofs: LU (MUMPS on several ranks or
+    from MUMPS_FROM_DOFS dofs), as GMRES's lagged preconditioner (LAGGED) or applied once
+    (preonly)."""
+    mumps = comm.size > 1 or n_dofs >= MUMPS_FROM_DOFS
     return dict(LAGGED if lagged else {"ksp_type": "preonly", "pc_type": "lu"},
-                **({"pc_factor_mat_solver_type": "mumps"} if comm.size > 1 else {}))
+                **({"pc_factor_mat_solver_type": "mumps"} if mumps else {}))
 
 
 class OutsidePattern(RuntimeError):
@@ -111,9 +122,13 @@ class LinearSystem:
         self.factorizations = 0           # LU factorizations computed (lagged only)
         self._factored = False
         self._since = 0                   # GMRES iterations since the last factorization
-        merged = dict(ITERATIVE) if self.fallback else _direct(grid.comm, self.lagged)
+        merged = (dict(ITERATIVE) if self.fallback
+                  else _direct(grid.comm, self.A.getSize()[0], self.lagged))
         merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
         merged.update(petsc_options or {})
+        pc_type = merged.get("pc_type") or opts.getString(prefix + "pc_type", "lu")
+        if pc_type not in ("lu", "cholesky") and "pc_factor_mat_solver_type" not in (petsc_options or {}):
+            merged.pop("pc_factor_mat_solver_type", None)   # the LU default's, not for e.g. ILU
         saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
         for k, v in merged.items():
             opts[prefix + k] = v
@@ -271,8 +286,9 @@ class LinearSystem:
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
         pc.setType("lu")
-        if self.grid.comm.size > 1:
-            pc.setFactorSolverType("mumps")
+        solver = _direct(self.grid.comm, self.A.getSize()[0]).get("pc_factor_mat_solver_type")
+        if solver:
+            pc.setFactorSolverType(solver)
         self.ksp.setInitialGuessNonzero(False)
 
     def destroy(self):
