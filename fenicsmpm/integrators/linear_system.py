@@ -72,10 +72,10 @@ class LinearSystem:
     Solver options: PETSc options under `prefix` (default "fenicsmpm_"), e.g.
     `-fenicsmpm_ksp_type gmres -fenicsmpm_pc_type hypre`, or the `petsc_options` dict. The
     default is GMRES preconditioned by an LU factorization kept between solves (LAGGED,
-    _solve_lagged; MUMPS on several ranks); iterative=True (the dynamic integrators' default,
-    used only when neither the dict nor the command line sets an option under `prefix`) starts
-    with ITERATIVE and switches to that LU for good, logged once, the first time the KSP
-    fails, re-solving the same system."""
+    _solve_lagged; MUMPS on several ranks or from MUMPS_FROM_DOFS dofs); iterative=True (the
+    dynamic integrators' default, used only when neither the dict nor the command line sets an
+    option under `prefix`) starts with ITERATIVE and switches to that lagged LU for good,
+    logged once, the first time the KSP fails, re-solving the same system."""
 
     def __init__(self, grid, petsc_options=None, prefix=DEFAULT_PREFIX, rings=1, shape="mpm",
                  iterative=False):
@@ -230,7 +230,7 @@ class LinearSystem:
         if reason < 0 and self.fallback:           # the iterative default failed: LU from now on
             its = self.iterations
             self._use_direct(reason)
-            reason = self._solve_once()
+            reason = self._solve_lagged()
             self.iterations += its
         if tie is not None:
             tie.expand(self.x.vector.copy(), self.x.vector)
@@ -275,15 +275,20 @@ class LinearSystem:
         return self._solve_once()
 
     def _use_direct(self, reason):
-        """Switch the KSP to the direct default (collective: the converged reason is global)."""
+        """Switch the KSP to the direct default, lagged as QuasiStatic's (LAGGED,
+        _solve_lagged; collective: the converged reason is global)."""
         self.fallback = False
         self.switched = True
+        self.lagged = True
+        self._factored = False
         if self.grid.comm.rank == 0:
             logging.getLogger("fenicsmpm").warning(
                 "the iterative linear solver (GMRES + block Jacobi/ILU) failed (%s after %d "
                 "iterations); using the direct LU solver from now on", _reason_name(reason),
                 self.ksp.getIterationNumber())
         self.ksp.setType("preonly")
+        self.ksp.setPCSide(PETSc.PC.Side.RIGHT)
+        self.ksp.setTolerances(rtol=LAGGED["ksp_rtol"], max_it=LAGGED["ksp_max_it"])
         pc = self.ksp.getPC()
         pc.setType("lu")
         solver = _direct(self.grid.comm, self.A.getSize()[0]).get("pc_factor_mat_solver_type")
