@@ -114,15 +114,19 @@ def scenes(quick=False, scale=1.0):
 
 def scene_config(spec):
     """The run's config record (h and dt are filled in by build_scene)."""
-    n = spec["cells"]
-    bx, by = n - 2 * MARGIN, n - MARGIN
+    n, dim = spec["cells"], spec.get("dim", 2)
+    if dim not in (2, 3):
+        raise ValueError(f"{CASE}: 'dim' must be 2 or 3, got {dim!r}")
     family = spec.get("shape")
+    # 3D (spec dim=3): the same block as a hexahedral box, the margins on the four sides
     cfg = dict(integrator=spec["integrator"], scheme=spec["scheme"],
-               shape=family or "Q1 (standard MPM)", shape_family=family,
-               h=LENGTH / n, dt=None, ppc=spec["per_cell"] ** 2, per_cell=spec["per_cell"],
-               cell_type="quadrilateral", grid_cells=[n, n], block_cells=[bx, by],
+               shape=family or f"{'Q1' if dim == 2 else 'Q1 hex'} (standard MPM)",
+               shape_family=family, h=LENGTH / n, dt=None, ppc=spec["per_cell"] ** dim,
+               per_cell=spec["per_cell"],
+               cell_type="quadrilateral" if dim == 2 else "hexahedron", grid_cells=[n] * dim,
+               block_cells=[n - 2 * MARGIN] * (dim - 1) + [n - MARGIN],
                margin_cells=MARGIN, length=LENGTH, material="LinearElastic", E=E, nu=NU,
-               density=RHO, gravity=[0.0, -GRAVITY], base="fixed (x and y)",
+               density=RHO, gravity=[0.0] * (dim - 1) + [-GRAVITY], base="fixed (every component)",
                warmup_steps=spec["warmup"])
     if spec["integrator"] == "Explicit":
         cfg.update(dt_rule="auto", cfl=0.5, flip=1.0)
@@ -141,15 +145,19 @@ def build_scene(cfg, comm=None):
     from dolfinx import mesh as dmesh
     import fenicsmpm as fm
     comm = common.world(comm)
-    n = cfg["grid_cells"][0]
+    n, dim = cfg["grid_cells"][0], len(cfg["grid_cells"])
     L, h = cfg["length"], cfg["length"] / n
-    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [L, L]], [n, n],
-                                 dmesh.CellType.quadrilateral)
+    if dim == 2:
+        msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [L, L]], [n, n],
+                                     dmesh.CellType.quadrilateral)
+    else:
+        msh = dmesh.create_box(comm, [[0.0] * 3, [L] * 3], [n] * 3, dmesh.CellType.hexahedron)
     grid = fm.Grid(msh)
     mat = fm.LinearElastic(E=cfg["E"], nu=cfg["nu"], density=cfg["density"])
-    x0, x1, y1 = MARGIN * h, L - MARGIN * h, L - MARGIN * h
+    x0, x1, top = MARGIN * h, L - MARGIN * h, L - MARGIN * h
     pts = fm.Particles.fill(grid, mat, per_cell=cfg["per_cell"],
-                            region=lambda x: (x[:, 0] > x0) & (x[:, 0] < x1) & (x[:, 1] < y1))
+                            region=lambda x: np.all((x[:, :dim - 1] > x0) & (x[:, :dim - 1] < x1),
+                                                    axis=1) & (x[:, dim - 1] < top))
     if cfg["integrator"] == "Explicit":
         integ, dt = fm.Explicit(cfg["scheme"], flip=cfg["flip"]), "auto"
     else:
@@ -164,7 +172,7 @@ def build_scene(cfg, comm=None):
             dt = cfg["dt_factor"] * grid.h / mat.p_wave_speed      # = dt_factor * sim.dt_critical
     sim = fm.Simulation(grid, pts, integ, dt=dt, gravity=cfg["gravity"],
                         cfl=cfg.get("cfl", 0.5), shape=cfg.get("shape_family") or "mpm")
-    sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
+    sim.fix(lambda x: np.isclose(x[:, dim - 1], 0.0))
     cfg["h"], cfg["dt"], cfg["dt_critical"] = grid.h, sim.dt, sim.dt_critical
     cfg["shape_family"] = getattr(sim, "shape", cfg.get("shape_family"))    # as resolved
     return sim
