@@ -16,6 +16,9 @@ Runs (full size / --quick):
   quasi-static (full size only): the same block, gravity ramped over the warm-up and measured
       steps (each step loads), default KSP (GMRES + lagged LU), with shape="auto" (cpGIMP)
       and "mpm"
+A spec with dim=3 builds the same block as a box of hexahedra (MARGIN empty cells on its four
+sides and top; not among the rows: docs/guide/integrators.md measures 3D quasi-static steps
+with it), and lu_times() times PETSc's LU against MUMPS on the quasi-static tangent.
 The warm-up absorbs numba compilation and first-call set-up; sim.timers are zeroed after it.
 These runs use the process's numba threads (NUMBA_NUM_THREADS; config "threads").
 

@@ -126,9 +126,11 @@ class LinearSystem:
                   else _direct(grid.comm, self.A.getSize()[0], self.lagged))
         merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
         merged.update(petsc_options or {})
+        # the LU default's solver type (MUMPS) is not for a user's other PC (MUMPS has no ILU)
         pc_type = merged.get("pc_type") or opts.getString(prefix + "pc_type", "lu")
-        if pc_type not in ("lu", "cholesky") and "pc_factor_mat_solver_type" not in (petsc_options or {}):
-            merged.pop("pc_factor_mat_solver_type", None)   # the LU default's, not for e.g. ILU
+        if pc_type not in ("lu", "cholesky") and \
+                "pc_factor_mat_solver_type" not in (petsc_options or {}):
+            merged.pop("pc_factor_mat_solver_type", None)
         saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
         for k, v in merged.items():
             opts[prefix + k] = v
