@@ -169,3 +169,35 @@ def test_user_ilu_does_not_inherit_the_lu_solver_type(monkeypatch):
             (("lu", "mumps") if opts is None else ("ilu", "petsc"))
         u.append(sim.particles.u.copy())
     assert np.max(np.abs(u[0] - u[1])) <= 1e-8 * np.max(np.abs(u[0]))
+
+
+def test_factor_options_reach_mumps_and_keep_the_lagged_default():
+    """Options of the factored matrix (linear_system.FACTOR_OPTIONS, e.g. MUMPS's workspace
+    mat_mumps_icntl_14) are read when PETSc factors, not by KSPSetFromOptions: they reach
+    MUMPS, ask for it on a system below MUMPS_FROM_DOFS, and leave the lagged default on; the
+    run matches the default one to 1e-10 relative. A misspelt one raises, naming it."""
+    from fenicsmpm.bench import throughput as T
+    u = []
+    for opts in (None, {"mat_mumps_icntl_14": 60}):
+        spec = dict(name="factor", integrator="QuasiStatic", scheme="QuasiStatic", cells=24,
+                    per_cell=2, steps=1, warmup=1, shape="auto",
+                    **({"petsc_options": opts, "prefix": "test_factor_"} if opts else {}))
+        sim = T.build_scene(T.scene_config(spec))
+        sim.step()
+        system = sim.integrator.system
+        assert system.lagged
+        if opts:
+            pc = system.ksp.getPC()
+            assert pc.getFactorSolverType() == "mumps"
+            assert pc.getFactorMatrix().getMumpsIcntl(14) == 60
+            assert not PETSc.Options().hasName("test_factor_mat_mumps_icntl_14"), "leaked"
+        p = sim.particles
+        X = np.round(np.concatenate(sim.comm.allgather(p.x - p.u)), 9)
+        u.append(np.concatenate(sim.comm.allgather(p.u))[np.lexsort(X.T)])
+    assert np.max(np.abs(u[0] - u[1])) <= 1e-10 * np.max(np.abs(u[0]))
+    spec = dict(name="factor", integrator="QuasiStatic", scheme="QuasiStatic", cells=24,
+                per_cell=2, steps=1, warmup=1, shape="auto",
+                petsc_options={"mat_mumps_icntl_14x": 60}, prefix="test_factor_bad_")
+    sim = T.build_scene(T.scene_config(spec))
+    with pytest.raises(ValueError, match="mat_mumps_icntl_14x"):
+        sim.step()

@@ -41,11 +41,16 @@ LAGGED = {"ksp_type": "gmres", "pc_type": "lu", "ksp_pc_side": "right", "ksp_rto
 MUMPS_FROM_DOFS = 4000
 
 
-def _direct(comm, n_dofs, lagged=False):
-    """The direct default for a system of n_dofs global dofs: LU (MUMPS on several ranks or
-    from MUMPS_FROM_DOFS dofs), as GMRES's lagged preconditioner (LAGGED) or applied once
-    (preonly)."""
-    mumps = comm.size > 1 or n_dofs >= MUMPS_FROM_DOFS
+# options of the factored matrix (e.g. mat_mumps_icntl_14): PETSc reads them when it factors,
+# not in KSPSetFromOptions; LinearSystem puts them in the options database around each solve
+FACTOR_OPTIONS = "mat_"
+
+
+def _direct(comm, n_dofs, lagged=False, mumps=False):
+    """The direct default for a system of n_dofs global dofs: LU (MUMPS on several ranks, from
+    MUMPS_FROM_DOFS dofs, or when `mumps`: MUMPS options were given), as GMRES's lagged
+    preconditioner (LAGGED) or applied once (preonly)."""
+    mumps = mumps or comm.size > 1 or n_dofs >= MUMPS_FROM_DOFS
     return dict(LAGGED if lagged else {"ksp_type": "preonly", "pc_type": "lu"},
                 **({"pc_factor_mat_solver_type": "mumps"} if mumps else {}))
 
@@ -115,7 +120,16 @@ class LinearSystem:
         opts = PETSc.Options()
         _insert_command_line_options(prefix)
         self.prefix = prefix
-        defaults = not petsc_options and not any(k.startswith(prefix) for k in opts.getAll())
+        # factor options (FACTOR_OPTIONS, e.g. MUMPS's memory) keep the defaults and ask for
+        # MUMPS; any other option replaces the defaults
+        user = dict(petsc_options or {})
+        self._factor_options = {k: v for k, v in user.items() if k.startswith(FACTOR_OPTIONS)}
+        self._factor_checked = not self._factor_options
+        user = {k: v for k, v in user.items() if k not in self._factor_options}
+        given = [k[len(prefix):] for k in opts.getAll() if k.startswith(prefix)]
+        defaults = not user and all(k.startswith(FACTOR_OPTIONS) for k in given)
+        mumps = any(k.startswith(FACTOR_OPTIONS + "mumps_")
+                    for k in list(self._factor_options) + given)
         self.fallback = bool(iterative) and defaults
         self.switched = False             # the iterative default failed and LU took over
         self.lagged = not iterative and defaults    # LAGGED: the LU is kept between solves
@@ -123,19 +137,19 @@ class LinearSystem:
         self._factored = False
         self._since = 0                   # GMRES iterations since the last factorization
         merged = (dict(ITERATIVE) if self.fallback
-                  else _direct(grid.comm, self.A.getSize()[0], self.lagged))
+                  else _direct(grid.comm, self.A.getSize()[0], self.lagged, mumps))
         merged = {k: v for k, v in merged.items() if not opts.hasName(prefix + k)}
-        merged.update(petsc_options or {})
+        merged.update(user)
         # the LU default's solver type (MUMPS) is not for a user's other PC (MUMPS has no ILU)
         pc_type = merged.get("pc_type") or opts.getString(prefix + "pc_type", "lu")
-        if pc_type not in ("lu", "cholesky") and \
-                "pc_factor_mat_solver_type" not in (petsc_options or {}):
+        if pc_type not in ("lu", "cholesky") and "pc_factor_mat_solver_type" not in user:
             merged.pop("pc_factor_mat_solver_type", None)
+        self._mumps = mumps
         saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
         for k, v in merged.items():
             opts[prefix + k] = v
         self.ksp.setFromOptions()
-        unused = [k for k in (petsc_options or {}) if not _option_used(prefix + k)]
+        unused = [k for k in user if not _option_used(prefix + k)]
         for k in merged:
             opts.delValue(prefix + k)
             if k in saved:
@@ -243,8 +257,26 @@ class LinearSystem:
         return self.x.x.array.reshape(R.shape).copy()
 
     def _solve_once(self):
-        """One KSP solve of b into x: the converged reason (iterations in self.iterations)."""
-        self.ksp.solve(self.b.vector, self.x.vector)
+        """One KSP solve of b into x: the converged reason (iterations in self.iterations).
+        The factor options (FACTOR_OPTIONS) are in the options database during the solve only;
+        after the first solve that factors, one PETSc did not read raises ValueError."""
+        opts = PETSc.Options()
+        for k, v in self._factor_options.items():
+            opts[self.prefix + k] = v
+        try:
+            self.ksp.solve(self.b.vector, self.x.vector)
+            unused = [] if self._factor_checked or self.ksp.getPC().getType() not in \
+                ("lu", "cholesky") else \
+                [k for k in self._factor_options if not _option_used(self.prefix + k)]
+        finally:
+            for k in self._factor_options:
+                opts.delValue(self.prefix + k)
+        if not self._factor_checked and self.ksp.getPC().getType() in ("lu", "cholesky"):
+            self._factor_checked = True
+            if unused:
+                raise ValueError(f"petsc_options: the factorization did not use {sorted(unused)} "
+                                 f"(misspelt, or not an option of its solver type "
+                                 f"{self.ksp.getPC().getFactorSolverType()!r})")
         self.iterations = self.ksp.getIterationNumber()
         return self.ksp.getConvergedReason()
 
@@ -293,7 +325,8 @@ class LinearSystem:
         self.ksp.setTolerances(rtol=LAGGED["ksp_rtol"], max_it=LAGGED["ksp_max_it"])
         pc = self.ksp.getPC()
         pc.setType("lu")
-        solver = _direct(self.grid.comm, self.A.getSize()[0]).get("pc_factor_mat_solver_type")
+        solver = _direct(self.grid.comm, self.A.getSize()[0],
+                         mumps=self._mumps).get("pc_factor_mat_solver_type")
         if solver:
             pc.setFactorSolverType(solver)
         self.ksp.setInitialGuessNonzero(False)
