@@ -48,6 +48,8 @@ def test_failed_iterative_default_switches_to_lu(monkeypatch, caplog):
             assert _ksp(sim)[1] == "lu" and not system.fallback and system.switched
             assert system.lagged and 1 <= system.factorizations <= sim.step_count, \
                 (system.factorizations, sim.integrator.iterations)
+            assert system.ksp.getTolerances()[0] == 1e-12       # LAGGED's, not ITERATIVE's
+            assert system.ksp.getPCSide() == PETSc.PC.Side.RIGHT
             if sim.comm.rank == 0:
                 assert sum("using the direct LU solver" in r.getMessage() for r in caplog.records) == 1
     assert np.max(np.abs(res[0] - res[1])) <= 1e-12 * np.max(np.abs(res[1]))

@@ -145,20 +145,29 @@ class LinearSystem:
         if pc_type not in ("lu", "cholesky") and "pc_factor_mat_solver_type" not in user:
             merged.pop("pc_factor_mat_solver_type", None)
         self._mumps = mumps
-        saved = {k: opts.getString(prefix + k) for k in merged if opts.hasName(prefix + k)}
-        for k, v in merged.items():
-            opts[prefix + k] = v
-        self.ksp.setFromOptions()
-        unused = [k for k in user if not _option_used(prefix + k)]
-        for k in merged:
-            opts.delValue(prefix + k)
-            if k in saved:
-                opts[prefix + k] = saved[k]
+        unused = self._set_options(merged, check=user)
         self.iterations = 0
         if unused:
             raise ValueError(f"petsc_options: PETSc did not use {sorted(unused)} (misspelt, or "
                              f"not an option of the chosen KSP/PC); see the PETSc manual pages of "
                              f"KSPSetFromOptions and PCSetFromOptions")
+
+    def _set_options(self, options, check=()):
+        """KSPSetFromOptions with `options` (without the prefix) put into PETSc's options
+        database for the call and taken out again, so they cannot leak into the next
+        simulation (what was there before is restored). Returns the keys of `check` that PETSc
+        did not read."""
+        opts, prefix = PETSc.Options(), self.prefix
+        saved = {k: opts.getString(prefix + k) for k in options if opts.hasName(prefix + k)}
+        for k, v in options.items():
+            opts[prefix + k] = v
+        self.ksp.setFromOptions()
+        unused = [k for k in check if not _option_used(prefix + k)]
+        for k in options:
+            opts.delValue(prefix + k)
+            if k in saved:
+                opts[prefix + k] = saved[k]
+        return unused
 
     def plan(self, nodes):
         """Scatter plan of the current particle-node connectivity (once per step). With the
@@ -261,17 +270,17 @@ class LinearSystem:
         The factor options (FACTOR_OPTIONS) are in the options database during the solve only;
         after the first solve that factors, one PETSc did not read raises ValueError."""
         opts = PETSc.Options()
+        factors = not self._factor_checked and self.ksp.getPC().getType() in ("lu", "cholesky")
         for k, v in self._factor_options.items():
             opts[self.prefix + k] = v
         try:
             self.ksp.solve(self.b.vector, self.x.vector)
-            unused = [] if self._factor_checked or self.ksp.getPC().getType() not in \
-                ("lu", "cholesky") else \
-                [k for k in self._factor_options if not _option_used(self.prefix + k)]
+            unused = [k for k in self._factor_options if factors and
+                      not _option_used(self.prefix + k)]
         finally:
             for k in self._factor_options:
                 opts.delValue(self.prefix + k)
-        if not self._factor_checked and self.ksp.getPC().getType() in ("lu", "cholesky"):
+        if factors:
             self._factor_checked = True
             if unused:
                 raise ValueError(f"petsc_options: the factorization did not use {sorted(unused)} "
@@ -320,16 +329,7 @@ class LinearSystem:
                 "the iterative linear solver (GMRES + block Jacobi/ILU) failed (%s after %d "
                 "iterations); using the direct LU solver from now on", _reason_name(reason),
                 self.ksp.getIterationNumber())
-        self.ksp.setType("preonly")
-        self.ksp.setPCSide(PETSc.PC.Side.RIGHT)
-        self.ksp.setTolerances(rtol=LAGGED["ksp_rtol"], max_it=LAGGED["ksp_max_it"])
-        pc = self.ksp.getPC()
-        pc.setType("lu")
-        solver = _direct(self.grid.comm, self.A.getSize()[0],
-                         mumps=self._mumps).get("pc_factor_mat_solver_type")
-        if solver:
-            pc.setFactorSolverType(solver)
-        self.ksp.setInitialGuessNonzero(False)
+        self._set_options(_direct(self.grid.comm, self.A.getSize()[0], True, self._mumps))
 
     def destroy(self):
         self.ksp.destroy()
