@@ -1,6 +1,6 @@
 """Pile installation: an axisymmetric rigid pile pushed (jacked) into Mohr-Coulomb sand.
 
-    python3 demos/pile_jacking.py [--out DIR] [--quick] [--t-end T]
+    python3 demos/pile_jacking.py [--out DIR] [--quick] [--t-end T] [--h H]
     mpirun -n 2 python3 demos/pile_jacking.py
 
 Geometry of seed 004 ch. 4: a soil body of radius 5 m and depth 10 m in the meridian plane
@@ -26,16 +26,23 @@ vertical stress below the tip at the end, and the resistance against two closed-
 estimates at the final depth d: shaft friction mu K0 (rho g d / 2) 2 pi r d and the tip
 bearing N_q rho g d pi r^2 with N_q = exp(pi tan phi) tan^2(45 + phi / 2) = 18.4 (both
 rough: the pile displaces the soil and changes K).
-Measured (serial, 2026-12-02; the default shape is the standard family for Mohr-Coulomb):
-h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 24.4 kN against 7.0 kN
-estimated, sigma_zz below the tip -59.3 kPa (with dt="auto" following the state the step
-shrinks twice by 9 %; with the initial dt throughout: 0.276 m, 23.9 kN, -54.7 kPa).
-2026-12-01, with the initial dt: h = 0.15 m, 1 s: penetration 0.475 m,
-resistance 26.6 kN against 12.1 kN, sigma_zz below the tip -350 kPa (on 2026-11-22, before
-the contact changes of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
+Measured (serial, 2026-12-05; the default shape is the standard family for Mohr-Coulomb;
+friction against the rigid pile only at the nodes on its side of its surface,
+fenicsmpm.contact.multi_velocity):
+h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 12.5 kN against 7.0 kN
+estimated, sigma_zz below the tip -285.7 kPa (15 s wall). To 1 s (0.475 m; estimate 12.1 kN),
+`--h H --t-end 1`: 26.9 / 14.2 / 52.3 kN at h = 0.3 / 0.15 / 0.075 m (2291 / 8832 / 35990
+particles, 3 / 31 / 226 s, the last beside another run), sigma_zz below the tip -74 / -223 /
+-1756 kPa. Before
+2026-12-05, when the contact also stuck the soil nodes up to a cell beside the shaft:
+24.4 kN at --quick, 26.6 kN at h = 0.15 m and 1 s (on 2026-11-22, before the contact changes
+of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
 The resistance is NOT converged: with the pile one cell wide the rigid body's reaction (minus
-the multi-velocity contact forces at its nodes) under-resolves the tip; treat it as
-qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle at r = 3.85 m
+the multi-velocity contact forces at its nodes) under-resolves the tip, and at h = 0.15 m it
+swings between 2 and 50 kN as the tip crosses cell rows; at h = 0.075 m (two cells across the
+pile) it rises steadily from 13 to 50 kN with a tip stress of -1.8 MPa, which points to
+volumetric locking of the isochoric (psi = 0) flow under the tip (the standard family without
+F-bar, Mohr-Coulomb's default: docs/guide/choosing.md). Treat it as qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle at r = 3.85 m
 was thrown out of the mesh.
 Writes DIR/pile_jacking.png: resistance vs penetration, penetration vs time, and the final
 vertical stress field (sigma_zz) with the pile, as rasters of squares of 3h/4 near the pile
@@ -112,8 +119,12 @@ def main(argv=None):
     parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
                         "'auto': the standard family for this plastic soil)")
     parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
+    parser.add_argument("--h", type=float, default=None,
+                        help="cell size [m] (default 0.15; --quick 0.3)")
     args = parser.parse_args(argv)
-    h = 0.3 if args.quick else 0.15
+    if args.h is not None and not args.h > 0.0:
+        parser.error(f"--h must be > 0, got {args.h}")
+    h = args.h or (0.3 if args.quick else 0.15)
     t_end = args.t_end or (0.6 if args.quick else 1.0)
     sim, k0 = build(h, args.shape)
     p = sim.particles
