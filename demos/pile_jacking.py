@@ -40,9 +40,10 @@ of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
 The resistance is NOT converged: with the pile one cell wide the rigid body's reaction (minus
 the multi-velocity contact forces at its nodes) under-resolves the tip, and at h = 0.15 m it
 swings between 2 and 50 kN as the tip crosses cell rows; at h = 0.075 m (two cells across the
-pile) it rises steadily from 13 to 50 kN with a tip stress of -1.8 MPa, which points to
-volumetric locking of the isochoric (psi = 0) flow under the tip (the standard family without
-F-bar, Mohr-Coulomb's default: docs/guide/choosing.md). Treat it as qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle at r = 3.85 m
+pile) it rises steadily from 13 to 50 kN with a tip stress of -1.8 MPa. Not volumetric
+locking alone: with F-bar (fm.Simulation(..., fbar=True), off by default for Mohr-Coulomb)
+the three sizes give 2.1 / 3.8 / 42.7 kN (tip stress -25 / -41 / -1174 kPa; 2026-12-05).
+Treat it as qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle at r = 3.85 m
 was thrown out of the mesh.
 Writes DIR/pile_jacking.png: resistance vs penetration, penetration vs time, and the final
 vertical stress field (sigma_zz) with the pile, as rasters of squares of 3h/4 near the pile
