@@ -39,6 +39,9 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     # rough contact: high at 2 cells (1.269; 1.083 / 1.053 at 5 / 10 cells; 1.349 while it
     # stuck a cell row of soil to the footing, docs/guide/choosing.md)
     assert 1.0 < q["h0.25-rough"] < 1.3, q
+    # the rough footing with its edge at a cell centre (2.5 cells under B/2): 1.087, still
+    # rising at the end of the push (1.004 / 1.029 at 5.5 / 10.5 cells, docs/guide/choosing.md)
+    assert abs(q["h0.2-rough-centred"] - 1.0) < 0.1, q
     # weightless associated Mohr-Coulomb (standard family, no F-bar: the defaults for it)
     # against Reissner's c N_c: 1.019 (phi 20) and 0.960 (phi 30) over 110-276 mm, ringing
     # +-17 % from window to window

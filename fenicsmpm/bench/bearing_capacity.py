@@ -20,6 +20,10 @@ means there) and the plateau's error. Writes
 out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
 curve per row).
 
+Rows h<h_i>-centred and h<h_i>-rough-centred (quick: only the rough one): the default and
+rough rows with the footing's edge at a cell centre, h_i = implicit_cell_size(h) below (2.5 /
+5.5 / 10.5 cells under B/2), where the footing is exactly B/2 wide.
+
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
 (problems.localisation.strip_footing(footing="particles"), fm.QuasiStatic with the library's
@@ -72,6 +76,9 @@ ROWS = (("default", "auto", "auto", {}, PUSH),
         ("rough", "auto", "auto", dict(mu=10.0), PUSH),
         ("mc20", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0), MC_PUSH),
         ("mc30", "auto", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH))
+# the defaults with the footing's edge at a cell centre (implicit_cell_size: B/2 exactly);
+# name, strip_footing options, in the quick run too
+CENTRED_ROWS = (("centred", {}, False), ("rough-centred", dict(mu=10.0), True))
 
 
 def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
@@ -184,6 +191,13 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             if h < 0.1 and use_fbar is False:
                 continue
             r = _row(h, name, shape, use_fbar, comm, push, **scene)
+            runs.append(r)
+            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
+                f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
+        for name, scene, in_quick in CENTRED_ROWS:
+            if quick and not in_quick:
+                continue
+            r = _row(implicit_cell_size(h), name, "auto", "auto", comm, PUSH, **scene)
             runs.append(r)
             say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
                 f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
