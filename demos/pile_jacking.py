@@ -33,18 +33,17 @@ h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 12.5 kN against 7.0 
 estimated, sigma_zz below the tip -285.7 kPa (15 s wall). To 1 s (0.475 m; estimate 12.1 kN),
 `--h H --t-end 1`: 26.9 / 14.2 / 52.3 kN at h = 0.3 / 0.15 / 0.075 m (2291 / 8832 / 35990
 particles, 3 / 31 / 226 s, the last beside another run), sigma_zz below the tip -74 / -223 /
--1756 kPa. Before
-2026-12-05, when the contact also stuck the soil nodes up to a cell beside the shaft:
-24.4 kN at --quick, 26.6 kN at h = 0.15 m and 1 s (on 2026-11-22, before the contact changes
-of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
+-1756 kPa. Before 2026-12-05, when the contact also stuck the soil nodes up to a cell beside
+the shaft: 24.4 kN at --quick, 26.6 kN at h = 0.15 m and 1 s (on 2026-11-22, before the
+contact changes of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
 The resistance is NOT converged: with the pile one cell wide the rigid body's reaction (minus
 the multi-velocity contact forces at its nodes) under-resolves the tip, and at h = 0.15 m it
 swings between 2 and 50 kN as the tip crosses cell rows; at h = 0.075 m (two cells across the
 pile) it rises steadily from 13 to 50 kN with a tip stress of -1.8 MPa. Not volumetric
 locking alone: with F-bar (fm.Simulation(..., fbar=True), off by default for Mohr-Coulomb)
 the three sizes give 2.1 / 3.8 / 42.7 kN (tip stress -25 / -41 / -1174 kPa; 2026-12-05).
-Treat it as qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle at r = 3.85 m
-was thrown out of the mesh.
+Treat it as qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle
+at r = 3.85 m was thrown out of the mesh.
 Writes DIR/pile_jacking.png: resistance vs penetration, penetration vs time, and the final
 vertical stress field (sigma_zz) with the pile, as rasters of squares of 3h/4 near the pile
 (fenicsmpm.io.particle_raster: the soil's mean sigma_zz, the pile's cells in black).

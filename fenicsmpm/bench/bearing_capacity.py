@@ -186,21 +186,20 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     runs = []
+
+    def explicit_row(r):
+        runs.append(r)
+        say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
+            f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
     for h in ((0.25,) if quick else (0.25, 0.1, 0.05)):
         for name, shape, use_fbar, scene, push in ROWS:
             if h < 0.1 and use_fbar is False:
                 continue
-            r = _row(h, name, shape, use_fbar, comm, push, **scene)
-            runs.append(r)
-            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
-                f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
+            explicit_row(_row(h, name, shape, use_fbar, comm, push, **scene))
         for name, scene, in_quick in CENTRED_ROWS:
             if quick and not in_quick:
                 continue
-            r = _row(implicit_cell_size(h), name, "auto", "auto", comm, PUSH, **scene)
-            runs.append(r)
-            say(f"{r['name']}: plateau {r['metrics']['plateau']:.3f} q_limit, spread "
-                f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
+            explicit_row(_row(implicit_cell_size(h), name, "auto", "auto", comm, PUSH, **scene))
         for name, scene in IMPLICIT_ROWS:
             r = _implicit_row(implicit_cell_size(h), name, comm, **scene)
             runs.append(r)

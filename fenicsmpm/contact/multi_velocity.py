@@ -399,9 +399,7 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
                     xs += node_x[i, k] * ref_n[i, k]
                 gap = lo_b[i, other] - hi_b[i, a] if s >= 0.0 else lo_b[i, a] - hi_b[i, other]
                 allowed = max(gap - gap_tol, 0.0) / dt
-                # a node on A's side of the rigid surface: no friction (its soil lies beyond
-                # the interface; sticking it made a rough footing a cell deep, 1.158 (2+pi) c_u
-                # at 5 cells under B/2 against 1.031 smooth)
+                # on A's side of the rigid surface: no friction (module docstring)
                 if (xs < lo_b[i, other] - surf_tol) if s >= 0.0 else (xs > hi_b[i, other] + surf_tol):
                     muab = 0.0
             elif gap_tol < 1e300:                    # deformable bodies still apart: no contact
