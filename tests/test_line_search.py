@@ -15,16 +15,22 @@ import fenicsmpm as fm
 from fenicsmpm.problems import localisation
 
 
-def _footing(line_search):
+def _footing(line_search, rtol=1e-8):
     return localisation.strip_footing(
         0.1, material=fm.VonMises(E=10e6, nu=0.49, density=1800.0, c_u=1e4), settlement=0.03,
-        steps=30, width=5.0, depth=3.0, half_width=0.5, cuts=0, line_search=line_search)
+        steps=30, width=5.0, depth=3.0, half_width=0.5, cuts=0, line_search=line_search,
+        rtol=rtol)
 
 
 def test_line_search_rescues_the_footing():
-    full = _footing(0)
+    """At Newton's tolerance 1e-6 (the localisation bench's): one full-suite run under
+    `mpirun -n 2` stopped the line_search=6 run at step 27 with the default 1e-8, which the
+    two ranks' direct-solver round-off (1e-9 between runs) puts within reach; measured
+    2026-12-05 on 2 ranks, rtol 1e-6: the full step fails at step 26, line_search=6 completes
+    with the same plateau to 2e-9 (1.0324)."""
+    full = _footing(0, 1e-6)
     assert not full["completed"] and "Newton did not converge" in full["stopped"], full["stopped"]
-    ls = _footing(6)
+    ls = _footing(6, 1e-6)
     assert ls["completed"], ls["stopped"]
     q = ls["pressure"] / ((2.0 + np.pi) * 1e4)
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
