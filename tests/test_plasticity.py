@@ -423,3 +423,31 @@ def test_opened_gap_closes_without_stress(c):
     assert st[0, 2] == 0.0
     p = np.trace(sig[0]) / 3.0
     assert p == pytest.approx(apex - K * (2e-3 - (g - 9e-3)), rel=1e-12)
+
+
+@pytest.mark.parametrize("c", [0.0, 2e3])
+def test_without_separation_compaction_loads_at_once(c):
+    """MohrCoulomb(separation=False): the same opening leaves no gap (state column 2 stays
+    0), so the first compaction is elastic from the apex: p = p_apex - K eps, exact to
+    round-off."""
+    mat = fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=30.0, c=c, separation=False)
+    assert not mat.separation and "separation=False" in repr(mat)
+    assert not mat.reduced(1.5).separation
+    apex = c / np.tan(np.radians(30.0))
+    K = mat.lame_lambda + 2.0 * mat.shear_modulus / 3.0
+    sig = np.zeros((1, 3, 3))
+    st = np.zeros((1, mat.n_state))
+    iso = lambda e: (1.0 + e / 3.0) * np.eye(3)[None]
+    for _ in range(10):
+        sig, st = _run(mat, iso(1e-3), sig, st)
+    assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
+    assert st[0, 2] == 0.0 and st[0, 1] > 0.0095          # plastic opening, but no gap
+    sig, st = _run(mat, iso(-1e-3), sig, st)
+    assert st[0, 2] == 0.0
+    assert np.trace(sig[0]) / 3.0 == pytest.approx(apex - K * 1e-3, rel=1e-12)
+
+
+@pytest.mark.parametrize("bad", [1, "no", None])
+def test_separation_is_checked(bad):
+    with pytest.raises(ValueError, match="'separation'"):
+        fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=30.0, c=0.0, separation=bad)

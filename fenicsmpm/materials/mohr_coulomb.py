@@ -34,7 +34,10 @@ so a particle pulled apart to many times its volume stays at the apex stress unt
 at the volume where it separated, instead of reloading its nodes with the stress of the whole
 compaction times its inflated volume (the granular collapse blew up this way,
 problems.granular_collapse).  The consistent tangent ignores the gap (an implicit Newton step
-closing a gap sees the elastic tangent).
+closing a gap sees the elastic tangent).  MohrCoulomb(separation=False) opens no gap: noise in
+the strain increments of a flowing mass also makes openings, and every particle that opened
+one is stress-free, hence strengthless (c = 0), until compacted back (docs/guide/materials.md
+has the granular collapse's figures both ways).
 
 History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
                          1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p),
@@ -358,24 +361,27 @@ def _frozen(state, p, nl, mf, par, out):
 
 
 @numba.njit(parallel=PRANGE, cache=True)
-def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf):
+def mohr_coulomb_stress_kernel(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf,
+                               sep=True):
     """sigma_new = principal return of the Jaumann predictor; state[:, 0:3] += (d eps_d^p,
     d eps_v^p, d g).  par = (phi_peak, phi_res, c_peak, c_res, eta), angles in radians; nl:
     see _frozen.  The gap g = state[:, 2] >= 0 (module docstring) takes up compaction first:
     close = min(g, -tr eps) when tr eps < 0, and grows by the opening of apex and cut-off
-    returns. Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+    returns (sep=False: no gap opens, MohrCoulomb(separation=False)). Threaded over chunks
+    of RETURN_CHUNK particles (kernels.threads)."""
     n = idx.shape[0]
     nc = particle_chunks(n, RETURN_CHUNK)
     if nc == 1:
         return _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf,
-                          np.int64(0), n)
+                          np.int64(0), n, sep)
     for c in numba.prange(nc):
         lo, hi = chunk(n, nc, c)
-        _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf, lo, hi)
+        _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf, lo, hi,
+                   sep)
 
 
 @numba.njit(cache=True)
-def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf, lo, hi):
+def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl, mf, lo, hi, sep):
     pf = np.empty(5)
     S = np.empty((3, 3))
     sig = np.empty(3)
@@ -412,11 +418,13 @@ def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl,
                                       + V[i, 2] * sig[2] * V[j, 2])
         state[p, 0] += dk
         state[p, 1] += dv
-        state[p, 2] += opening
+        if sep:
+            state[p, 2] += opening
 
 
 @numba.njit(parallel=PRANGE, cache=True)
-def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf):
+def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf,
+                                sep=True):
     """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state.
     Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
     n = idx.shape[0]
@@ -516,7 +524,9 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
         phi_res in [0, phi] (default phi), c_res in [0, c] (default c), phi_res > 0 or c_res > 0;
         eta >= 0 (softening rate; 0 = perfectly plastic);
         nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: phi and c follow the
-        over-nonlocal average of eps_d^p (materials.regularisation).
+        over-nonlocal average of eps_d^p (materials.regularisation);
+        separation True (default) keeps the opening of apex and cut-off returns as the gap g
+        (module docstring), False lets compaction strain the skeleton at once (g stays 0).
     History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p, state[:, 2] = the gap g, with
     nonlocal_length state[:, 3] = <eps_d^p> (module docstring).
     """
@@ -525,8 +535,12 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
     n_state = 3
 
     def __init__(self, E, nu, density, phi, c, psi=0.0, tension_cutoff=None, phi_res=None,
-                 c_res=None, eta=0.0, nonlocal_length=None, nonlocal_m=2.0):
+                 c_res=None, eta=0.0, nonlocal_length=None, nonlocal_m=2.0, separation=True):
         owner = type(self).__name__
+        if not isinstance(separation, (bool, np.bool_)):
+            raise ValueError(f"{owner}: parameter 'separation' must be True or False, got "
+                             f"{separation!r}")
+        self._separation = bool(separation)
         self._set_parameters(E, nu, density)
         self._set_nonlocal(nonlocal_length, nonlocal_m, 3)
         self._phi = _check_range(owner, "phi", phi, 0.0, 90.0, hi_open=True, what=" degrees")
@@ -563,6 +577,8 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
     c_res = property(lambda self: self._c_res, doc="Residual cohesion.")
     eta = property(lambda self: self._eta, doc="Softening rate of exp(-eta eps_d^p).")
     tension_cutoff = property(lambda self: self._st, doc="Tension cut-off on sigma_3 (or None).")
+    separation = property(lambda self: self._separation,
+                          doc="Whether apex and cut-off openings are kept as a gap (module docstring).")
 
     def strength(self, eps_d):
         """(phi [deg], c) at accumulated plastic deviatoric strain eps_d (seed 003)."""
@@ -575,7 +591,7 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
                         self._c_res, self._eta])
         st = math.inf if self._st is None else self._st
         return (self.lame_lambda, self.shear_modulus, par, math.sin(math.radians(self._psi)), st,
-                self.nonlocal_column, self.nonlocal_m)
+                self.nonlocal_column, self.nonlocal_m, self._separation)
 
     def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
         """Write sigma_new[idx] and the trial history state[idx]; ``F_old`` is unused."""
@@ -605,10 +621,11 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
                            tension_cutoff=None if self._st is None else self._st / F,
                            phi_res=min(phi_res, red(self._phi)), c_res=self._c_res / F,
                            eta=self._eta, nonlocal_length=self.nonlocal_length,
-                           nonlocal_m=self.nonlocal_m)
+                           nonlocal_m=self.nonlocal_m, separation=self._separation)
 
     def __repr__(self):
         return (f"MohrCoulomb(E={self.E!r}, nu={self.nu!r}, density={self.density!r}, "
                 f"phi={self._phi!r}, c={self._c!r}, psi={self._psi!r}, "
                 f"tension_cutoff={self._st!r}, phi_res={self._phi_res!r}, "
-                f"c_res={self._c_res!r}, eta={self._eta!r}{self._nonlocal_repr()})")
+                f"c_res={self._c_res!r}, eta={self._eta!r}{self._nonlocal_repr()}"
+                f"{'' if self._separation else ', separation=False'})")
