@@ -36,7 +36,7 @@ compaction times its inflated volume (the granular collapse blew up this way,
 problems.granular_collapse).  The consistent tangent ignores the gap (an implicit Newton step
 closing a gap sees the elastic tangent).  MohrCoulomb(separation=False) opens no gap: noise in
 the strain increments of a flowing mass also makes openings, and every particle that opened
-one is stress-free, hence strengthless (c = 0), until compacted back (docs/guide/materials.md
+one is stress-free, hence strengthless (c = 0), until compacted back (docs/guide/choosing.md
 has the granular collapse's figures both ways).
 
 History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
@@ -425,8 +425,8 @@ def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl,
 @numba.njit(parallel=PRANGE, cache=True)
 def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf,
                                 sep=True):
-    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state.
-    Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state
+    (sep: as in the stress kernel, unused: the tangent ignores the gap). Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
     n = idx.shape[0]
     nc = particle_chunks(n, RETURN_CHUNK)
     if nc == 1:
