@@ -87,5 +87,6 @@ def test_without_separation_the_column_stands_taller(shape, runout, height):
     r = collapse(2.0, cells=8, shape=shape, separation=False)
     assert r["finished"], r["error"]
     assert r["t_rest"] < 5.0 and r["particles"] == 8 * 16 * 4
-    assert r["runout"] == pytest.approx(runout, rel=0.02) and r["height"] == pytest.approx(height, rel=0.02)
+    assert r["runout"] == pytest.approx(runout, rel=0.02), r
+    assert r["height"] == pytest.approx(height, rel=0.02), r
     assert abs(r["runout_error"]) < 0.05 and abs(r["height_error"]) < 0.05, r

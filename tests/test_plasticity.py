@@ -396,6 +396,25 @@ def test_mohr_coulomb_block_under_gravity_migrates_history():
         assert moved > 0, "no particle changed rank: migration of the history is not exercised"
 
 
+def _iso(e):
+    """An isotropic stretch of volumetric strain e, as a (1, 3, 3) dF."""
+    return (1.0 + e / 3.0) * np.eye(3)[None]
+
+
+def _pulled_apart(c, **options):
+    """A phi = 30 deg Mohr-Coulomb particle (cohesion c, `options`) opened by 10 x 1e-3
+    volumetric strain from a stress-free state; asserts it sits at the apex. Returns (mat,
+    apex stress, bulk modulus K, sigma, history)."""
+    mat = fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=30.0, c=c, **options)
+    apex = c / np.tan(np.radians(30.0))
+    K = mat.lame_lambda + 2.0 * mat.shear_modulus / 3.0
+    sig, st = np.zeros((1, 3, 3)), np.zeros((1, mat.n_state))
+    for _ in range(10):
+        sig, st = _run(mat, _iso(1e-3), sig, st)
+    assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
+    return mat, apex, K, sig, st
+
+
 @pytest.mark.parametrize("c", [0.0, 2e3])
 def test_opened_gap_closes_without_stress(c):
     """Issue 21 item 4: a Mohr-Coulomb particle pulled apart beyond its strength (the apex)
@@ -404,22 +423,14 @@ def test_opened_gap_closes_without_stress(c):
     K = lambda + 2 mu / 3, exact to round-off.  (Without the gap the same compaction gave
     p = -K eps: a loose particle that had stretched to J = 38 loaded its nodes with 38 times
     its volume and blew the granular collapse up.)"""
-    mat = fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=30.0, c=c)
-    apex = c / np.tan(np.radians(30.0))
-    K = mat.lame_lambda + 2.0 * mat.shear_modulus / 3.0
-    sig = np.zeros((1, 3, 3))
-    st = np.zeros((1, mat.n_state))
-    iso = lambda e: (1.0 + e / 3.0) * np.eye(3)[None]
-    for _ in range(10):                          # open by 10 x 1e-3 (volumetric)
-        sig, st = _run(mat, iso(1e-3), sig, st)
-    assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
+    mat, apex, K, sig, st = _pulled_apart(c)
     g = st[0, 2]
     assert 0.0095 < g <= 0.01                   # the opening beyond the elastic tension
     for _ in range(9):                           # close by 9e-3 < g: stress stays at the apex
-        sig, st = _run(mat, iso(-1e-3), sig, st)
+        sig, st = _run(mat, _iso(-1e-3), sig, st)
         assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
     assert st[0, 2] == pytest.approx(g - 9e-3, abs=1e-15)
-    sig, st = _run(mat, iso(-2e-3), sig, st)     # closes g, then compacts elastically
+    sig, st = _run(mat, _iso(-2e-3), sig, st)     # closes g, then compacts elastically
     assert st[0, 2] == 0.0
     p = np.trace(sig[0]) / 3.0
     assert p == pytest.approx(apex - K * (2e-3 - (g - 9e-3)), rel=1e-12)
@@ -430,19 +441,11 @@ def test_without_separation_compaction_loads_at_once(c):
     """MohrCoulomb(separation=False): the same opening leaves no gap (state column 2 stays
     0), so the first compaction is elastic from the apex: p = p_apex - K eps, exact to
     round-off."""
-    mat = fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=30.0, c=c, separation=False)
+    mat, apex, K, sig, st = _pulled_apart(c, separation=False)
     assert not mat.separation and "separation=False" in repr(mat)
     assert not mat.reduced(1.5).separation
-    apex = c / np.tan(np.radians(30.0))
-    K = mat.lame_lambda + 2.0 * mat.shear_modulus / 3.0
-    sig = np.zeros((1, 3, 3))
-    st = np.zeros((1, mat.n_state))
-    iso = lambda e: (1.0 + e / 3.0) * np.eye(3)[None]
-    for _ in range(10):
-        sig, st = _run(mat, iso(1e-3), sig, st)
-    assert np.allclose(sig[0], apex * np.eye(3), atol=1e-9 * max(apex, 1.0))
     assert st[0, 2] == 0.0 and st[0, 1] > 0.0095          # plastic opening, but no gap
-    sig, st = _run(mat, iso(-1e-3), sig, st)
+    sig, st = _run(mat, _iso(-1e-3), sig, st)
     assert st[0, 2] == 0.0
     assert np.trace(sig[0]) / 3.0 == pytest.approx(apex - K * 1e-3, rel=1e-12)
 

@@ -423,10 +423,9 @@ def _mc_stress(idx, dF, sigma_old, sigma_new, state, lam, mu, par, spsi, st, nl,
 
 
 @numba.njit(parallel=PRANGE, cache=True)
-def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf,
-                                sep=True):
-    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state
-    (sep: as in the stress kernel, unused: the tangent ignores the gap). Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
+def mohr_coulomb_tangent_kernel(idx, dF, sigma_old, state, dsig, lam, mu, par, spsi, st, nl, mf):
+    """dsig[p,i,j,k,l] = d sigma_new_ij / d dF_kl (consistent), from the committed state.
+    Threaded over chunks of RETURN_CHUNK particles (kernels.threads)."""
     n = idx.shape[0]
     nc = particle_chunks(n, RETURN_CHUNK)
     if nc == 1:
@@ -591,12 +590,12 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
                         self._c_res, self._eta])
         st = math.inf if self._st is None else self._st
         return (self.lame_lambda, self.shear_modulus, par, math.sin(math.radians(self._psi)), st,
-                self.nonlocal_column, self.nonlocal_m, self._separation)
+                self.nonlocal_column, self.nonlocal_m)
 
     def stress(self, idx, dF, F_old, sigma_old, sigma_new, state):
         """Write sigma_new[idx] and the trial history state[idx]; ``F_old`` is unused."""
         mohr_coulomb_stress_kernel(np.asarray(idx, dtype=np.int64), dF, sigma_old, sigma_new,
-                                   state, *self._kernel_args())
+                                   state, *self._kernel_args(), self._separation)
 
     def tangent(self, idx, dF, F_old, sigma_old, sigma_new, state, dsig):
         """Write dsig[idx] = d sigma_new / d dF, the consistent tangent of `stress` from the
