@@ -417,13 +417,14 @@ def _pulled_apart(c, **options):
 
 @pytest.mark.parametrize("c", [0.0, 2e3])
 def test_opened_gap_closes_without_stress(c):
-    """Issue 21 item 4: a Mohr-Coulomb particle pulled apart beyond its strength (the apex)
-    stores the opening as the gap g (state column 2) and carries the apex stress while it
-    recompacts by up to g; only compaction beyond g is elastic: p = p_apex - K (eps - g),
+    """Issue 21 item 4, MohrCoulomb(separation=True): a particle pulled apart beyond its
+    strength (the apex) stores the opening as the gap g (state column 2) and carries the apex
+    stress while it recompacts by up to g; only compaction beyond g is elastic: p = p_apex - K (eps - g),
     K = lambda + 2 mu / 3, exact to round-off.  (Without the gap the same compaction gave
     p = -K eps: a loose particle that had stretched to J = 38 loaded its nodes with 38 times
     its volume and blew the granular collapse up.)"""
-    mat, apex, K, sig, st = _pulled_apart(c)
+    mat, apex, K, sig, st = _pulled_apart(c, separation=True)
+    assert mat.separation and "separation=True" in repr(mat) and mat.reduced(1.5).separation
     g = st[0, 2]
     assert 0.0095 < g <= 0.01                   # the opening beyond the elastic tension
     for _ in range(9):                           # close by 9e-3 < g: stress stays at the apex
@@ -438,11 +439,11 @@ def test_opened_gap_closes_without_stress(c):
 
 @pytest.mark.parametrize("c", [0.0, 2e3])
 def test_without_separation_compaction_loads_at_once(c):
-    """MohrCoulomb(separation=False): the same opening leaves no gap (state column 2 stays
-    0), so the first compaction is elastic from the apex: p = p_apex - K eps, exact to
-    round-off."""
-    mat, apex, K, sig, st = _pulled_apart(c, separation=False)
-    assert not mat.separation and "separation=False" in repr(mat)
+    """MohrCoulomb's default (separation=False): the same opening leaves no gap (state
+    column 2 stays 0), so the first compaction is elastic from the apex: p = p_apex - K eps,
+    exact to round-off."""
+    mat, apex, K, sig, st = _pulled_apart(c)
+    assert not mat.separation and "separation" not in repr(mat)
     assert not mat.reduced(1.5).separation
     assert st[0, 2] == 0.0 and st[0, 1] > 0.0095          # plastic opening, but no gap
     sig, st = _run(mat, _iso(-1e-3), sig, st)

@@ -524,8 +524,9 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
         eta >= 0 (softening rate; 0 = perfectly plastic);
         nonlocal_length None (local softening) or l > 0, nonlocal_m >= 1: phi and c follow the
         over-nonlocal average of eps_d^p (materials.regularisation);
-        separation True (default) keeps the opening of apex and cut-off returns as the gap g
-        (module docstring), False lets compaction strain the skeleton at once (g stays 0).
+        separation False (default, chosen by data: docs/guide/choosing.md) lets compaction
+        strain the skeleton at once (g stays 0); True keeps the opening of apex and cut-off
+        returns as the gap g (module docstring).
     History: state[:, 0] = eps_d^p, state[:, 1] = eps_v^p, state[:, 2] = the gap g, with
     nonlocal_length state[:, 3] = <eps_d^p> (module docstring).
     """
@@ -534,7 +535,7 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
     n_state = 3
 
     def __init__(self, E, nu, density, phi, c, psi=0.0, tension_cutoff=None, phi_res=None,
-                 c_res=None, eta=0.0, nonlocal_length=None, nonlocal_m=2.0, separation=True):
+                 c_res=None, eta=0.0, nonlocal_length=None, nonlocal_m=2.0, separation=False):
         owner = type(self).__name__
         if not isinstance(separation, (bool, np.bool_)):
             raise ValueError(f"{owner}: parameter 'separation' must be True or False, got "
@@ -627,4 +628,4 @@ class MohrCoulomb(NonlocalSoftening, IsotropicElasticParameters):
                 f"phi={self._phi!r}, c={self._c!r}, psi={self._psi!r}, "
                 f"tension_cutoff={self._st!r}, phi_res={self._phi_res!r}, "
                 f"c_res={self._c_res!r}, eta={self._eta!r}{self._nonlocal_repr()}"
-                f"{'' if self._separation else ', separation=False'})")
+                f"{', separation=True' if self._separation else ''})")

@@ -28,10 +28,11 @@ def lube_height(a):
 
 
 def granular_column(a, L0=1.0, cells=16, per_cell=2, integrator=None, comm=None,
-                    separation=True, **sim_options):
+                    separation=False, **sim_options):
     """The scene: (sim, L0, H0). The mesh spans 0 <= x <= L0 (1 + 2 lube_runout(a)) + 4 h and
     0 <= y <= H0 + 2 h. integrator: default fm.Explicit(); separation: the soil's
-    fm.MohrCoulomb(separation=...); sim_options go to fm.Simulation (default: the library's)."""
+    fm.MohrCoulomb(separation=...) (False: the library's default); sim_options go to
+    fm.Simulation (default: the library's)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
