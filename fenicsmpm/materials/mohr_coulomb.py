@@ -27,17 +27,19 @@ assembled with the spectral derivative (off-diagonal eigenbasis terms
 (sigma_i - sigma_j) / (sigma_tr_i - sigma_tr_j)) and chained with the Jaumann elastic predictor.
 
 Separation (issue 21 item 4): the plastic volumetric strain of returns to the apex and to the
-tension cut-off is the material coming apart (a granular front thinning into loose grains). It
-is kept as a gap g >= 0, and later compaction closes the gap before it strains the skeleton:
+tension cut-off is the material coming apart (a granular front thinning into loose grains).
+MohrCoulomb(separation=True) keeps it as a gap g >= 0, and later compaction closes the gap
+before it strains the skeleton:
     close = min(g, -tr eps) when tr eps < 0,   eps <- eps + close / 3 I,   g <- g - close,
 so a particle pulled apart to many times its volume stays at the apex stress until it is back
 at the volume where it separated, instead of reloading its nodes with the stress of the whole
 compaction times its inflated volume (the granular collapse blew up this way,
 problems.granular_collapse).  The consistent tangent ignores the gap (an implicit Newton step
-closing a gap sees the elastic tangent).  MohrCoulomb(separation=False) opens no gap: noise in
-the strain increments of a flowing mass also makes openings, and every particle that opened
-one is stress-free, hence strengthless (c = 0), until compacted back (docs/guide/choosing.md
-has the granular collapse's figures both ways).
+closing a gap sees the elastic tangent).  The default, separation=False, opens no gap: noise
+in the strain increments of a flowing mass also makes openings, and every particle that
+opened one is stress-free, hence strengthless (c = 0), until compacted back; since dt="auto"
+follows the state the collapse finishes without the gap, and stands taller
+(docs/guide/choosing.md has the granular collapse's figures both ways).
 
 History (state columns): 0 = eps_d^p (accumulated plastic deviatoric strain),
                          1 = eps_v^p (accumulated plastic volumetric strain, tr eps^p),
