@@ -29,13 +29,16 @@ rough: the pile displaces the soil and changes K).
 Measured (serial, 2026-12-05; the default shape is the standard family for Mohr-Coulomb;
 friction against the rigid pile only at the nodes on its side of its surface,
 fenicsmpm.contact.multi_velocity):
-h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 12.5 kN against 7.0 kN
-estimated, sigma_zz below the tip -285.7 kPa (15 s wall). To 1 s (0.475 m; estimate 12.1 kN),
-`--h H --t-end 1`: 26.9 / 14.2 / 52.3 kN at h = 0.3 / 0.15 / 0.075 m (2291 / 8832 / 35990
-particles, 3 / 31 / 226 s, the last beside another run), sigma_zz below the tip -74 / -223 /
--1756 kPa. Before 2026-12-05, when the contact also stuck the soil nodes up to a cell beside
-the shaft: 24.4 kN at --quick, 26.6 kN at h = 0.15 m and 1 s (on 2026-11-22, before the
-contact changes of issues 17 and 21: 9.1 kN and about 1 kN with spikes to 2.3 kN).
+h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 16.3 kN against 7.0 kN
+estimated, sigma_zz below the tip -196.9 kPa (4.2 s wall). To 1 s (0.474 m; estimate 12.1 kN),
+`--h H --t-end 1`: 27.0 / 15.5 kN at h = 0.3 / 0.15 m (2291 / 8832 particles, 7 / 32 s),
+sigma_zz below the tip -74 / -343 kPa. With Mohr-Coulomb's separation gap (the default before
+2026-12-05, same day): 12.5 kN and -285.7 kPa at --quick; at 1 s 26.9 / 14.2 / 52.3 kN at
+h = 0.3 / 0.15 / 0.075 m (the last 35990 particles, 226 s beside another run), sigma_zz below
+the tip -74 / -223 / -1756 kPa. Before 2026-12-05, when the contact also stuck the soil nodes
+up to a cell beside the shaft: 24.4 kN at --quick, 26.6 kN at h = 0.15 m and 1 s (on
+2026-11-22, before the contact changes of issues 17 and 21: 9.1 kN and about 1 kN with spikes
+to 2.3 kN).
 The resistance is NOT converged: with the pile one cell wide the rigid body's reaction (minus
 the multi-velocity contact forces at its nodes) under-resolves the tip, and at h = 0.15 m it
 swings between 2 and 50 kN as the tip crosses cell rows; at h = 0.075 m (two cells across the

@@ -6,8 +6,8 @@ Mohr-Coulomb sand with multi-velocity frictional contact (mu = 0.2) and a viscou
 - the tip loads the soil: the largest vertical stress within 1 m below the tip is more than
   twice the geostatic stress 1 m below the tip (measured -286 kPa against -25 kPa; -223 kPa
   at h = 0.15 m and 1 s). The pile resistance is printed, not asserted: it is not converged
-  in h (12.5 kN at h = 0.3 m, 0.6 s against a 7.0 kN closed-form estimate; at 1 s 26.9 /
-  14.2 / 52.3 kN at h = 0.3 / 0.15 / 0.075 m against 12.1 kN; see the demo docstring);
+  in h (16.3 kN at h = 0.3 m, 0.6 s against a 7.0 kN closed-form estimate; at 1 s 27.0 /
+  15.5 kN at h = 0.3 / 0.15 m against 12.1 kN; see the demo docstring);
 - JSON and PNG are written. Serial and under mpirun -n 2."""
 import os
 

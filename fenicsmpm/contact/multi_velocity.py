@@ -62,7 +62,8 @@ mu=10)`) pressed into the cell below its base read 1.349 / 1.158 / 1.072 (2 + pi
 2 / 5 / 10 cells under B/2, a cell of soil deeper than a smooth one (1.165 / 1.031 / 1.022);
 now 1.269 / 1.083 / 1.053. A block on a rigid incline whose face lies on a grid line slides
 and sticks to the same bits; the rigid pile of demos/pile_jacking.py (--quick), whose shaft
-dragged a cell of sand, meets 12.5 kN of resistance instead of 24.4 kN (estimate 7.0 kN).
+dragged a cell of sand, met 12.5 kN of resistance instead of 24.4 kN (estimate 7.0 kN; with
+Mohr-Coulomb's separation gap, the default then; 16.3 kN without it).
 Contact status: the trial projection records per node and body no contact, slip or stick;
 MUSL/AVG's re-mapped velocity, which the stress update sees, keeps that decision (normal
 relative velocity = the allowed approach, stuck bodies with v^cm) instead of deciding anew,
