@@ -601,8 +601,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                     raise
                 k += 1
                 last = done(k)
-                # with dt following the state the count is an estimate: full at the end only
-                bar.update(k if last else min(k, steps - 1), self.t)
+                if follow:    # dt follows the state: the count so far plus the time left / dt
+                    bar.total_steps = k + max(int(np.ceil((t_end - self.t) / self.dt - 1e-6)), 0)
+                bar.update(k, self.t)
                 if output is not None and self.step_count % output.every == 0:
                     output.write(self)
                 if checkpoint is not None and (self.step_count % checkpoint_every == 0 or last):

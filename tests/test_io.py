@@ -220,3 +220,28 @@ def test_progress_quiet():
     p.update(5, 0.5)
     p.close()
     assert s.getvalue() == ""
+
+
+def test_progress_count_follows_the_state_dt(monkeypatch):
+    """With dt="auto" following the state (explicit, run(t_end=...)) the progress line's step
+    count is re-estimated every step as the steps taken plus the time left / dt: it never
+    falls behind the step (before, it stuck at the first estimate minus one, e.g. "step
+    1546/1547" for the last 500 steps of the jacked pile), and ends at the steps taken.
+    Here the granular column's front stretches and dt falls from 1.32 ms to 0.94 ms by
+    t = 1 s (a = 2, h = L0 / 4: first estimate 758 steps, 865 taken)."""
+    import fenicsmpm.simulation as simulation
+    from fenicsmpm.problems.granular_collapse import granular_column
+    seen = []
+
+    class Recorder(Progress):
+        def update(self, step, t):
+            seen.append((step, self.total_steps))
+
+    monkeypatch.setattr(simulation, "Progress", Recorder)
+    sim, _, _ = granular_column(2.0, cells=4)
+    dt0 = sim.dt
+    sim.run(t_end=1.0)
+    assert sim.dt < 0.8 * dt0                       # dt followed the state
+    assert all(step <= total for step, total in seen)
+    assert seen[-1] == (sim.step_count, sim.step_count)
+    assert seen[0][1] < sim.step_count              # the first estimate was short
