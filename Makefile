@@ -62,7 +62,7 @@ venv: $(VENV)/.installed
 # The 2-rank pass first: its ranks compile the kernels once, at the same time; the serial pass
 # then starts warm (its second worker from a copy of the cache).
 test: $(VENV)/.installed deps-optional
-	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
+	timeout 1800 $(MPIRUN) $(PY) -m pytest -q --color=no tests
 	$(MAKE) --no-print-directory test-serial
 	$(MAKE) --no-print-directory docs
 
@@ -71,7 +71,7 @@ test-serial: $(VENV)/.installed deps-optional
 	$(PY) -m pytest -q --color=no $(XDIST) tests
 
 test-mpi: $(VENV)/.installed
-	timeout 1200 $(MPIRUN) $(PY) -m pytest -q --color=no tests
+	timeout 1800 $(MPIRUN) $(PY) -m pytest -q --color=no tests
 
 # The 2-rank pass on SCOTCH partitions of several seeds (tests/conftest.py): finds the tests
 # that pass on one partition of dolfinx's default partitioner and fail on another.
