@@ -419,10 +419,10 @@ def _pulled_apart(c, **options):
 def test_opened_gap_closes_without_stress(c):
     """Issue 21 item 4, MohrCoulomb(separation=True): a particle pulled apart beyond its
     strength (the apex) stores the opening as the gap g (state column 2) and carries the apex
-    stress while it recompacts by up to g; only compaction beyond g is elastic: p = p_apex - K (eps - g),
-    K = lambda + 2 mu / 3, exact to round-off.  (Without the gap the same compaction gave
-    p = -K eps: a loose particle that had stretched to J = 38 loaded its nodes with 38 times
-    its volume and blew the granular collapse up.)"""
+    stress while it recompacts by up to g; only compaction beyond g is elastic:
+    p = p_apex - K (eps - g), K = lambda + 2 mu / 3, exact to round-off.  (Without the gap
+    the same compaction gave p = -K eps: a loose particle that had stretched to J = 38
+    loaded its nodes with 38 times its volume and blew the granular collapse up.)"""
     mat, apex, K, sig, st = _pulled_apart(c, separation=True)
     assert mat.separation and "separation=True" in repr(mat) and mat.reduced(1.5).separation
     g = st[0, 2]

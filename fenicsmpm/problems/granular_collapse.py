@@ -28,10 +28,10 @@ def lube_height(a):
 
 
 def granular_column(a, L0=1.0, cells=16, per_cell=2, integrator=None, comm=None,
-                    separation=False, **sim_options):
+                    separation=None, **sim_options):
     """The scene: (sim, L0, H0). The mesh spans 0 <= x <= L0 (1 + 2 lube_runout(a)) + 4 h and
     0 <= y <= H0 + 2 h. integrator: default fm.Explicit(); separation: the soil's
-    fm.MohrCoulomb(separation=...) (False: the library's default); sim_options go to
+    fm.MohrCoulomb(separation=...) (None: the material's default); sim_options go to
     fm.Simulation (default: the library's)."""
     from dolfinx import mesh
     from mpi4py import MPI
@@ -46,7 +46,7 @@ def granular_column(a, L0=1.0, cells=16, per_cell=2, integrator=None, comm=None,
                                 mesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
     soil = fm.MohrCoulomb(E=10e6, nu=0.3, density=1500.0, phi=PHI, c=0.0, psi=0.0,
-                          separation=separation)
+                          **({} if separation is None else dict(separation=separation)))
     pts = fm.Particles.fill(grid, soil, per_cell=per_cell,
                             region=lambda x: (x[:, 0] < L0) & (x[:, 1] < H0))
     k0_stress(pts, gravity=G, surface=lambda x: np.full(len(x), H0))
