@@ -202,7 +202,7 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     width w = sum_p V_p eps_p / (eps_p,max L), L = prandtl_band_length(B/2), Newton
     iterations, completed/stop message and the time split (step wall, nonlocal).  A step
     whose Newton fails is retried as halves, up to `cuts` times (Simulation.max_dt_cuts; 5: on
-    2 ranks the W5 footing of tests/test_fbar.py with Newton's defaults stopped at 64 mm on
+    2 ranks the W5 footing of tests/test_implicit_footing.py with Newton's defaults stopped at 64 mm on
     one of 12 SCOTCH partitions with 3 and completed with 5, but stopped there with 5 on
     another partition of dolfinx's default partitioner; with ghost=0.01, line_search=6,
     rtol=1e-6 (bench.localisation.FOOTING) it completed on every partition tried).
