@@ -55,3 +55,48 @@ def test_auto_line_search_is_the_default_and_rescues_the_footing():
 def test_line_search_is_checked(bad):
     with pytest.raises(ValueError, match="'line_search'"):
         fm.QuasiStatic(line_search=bad)
+
+
+def _oedometer(line_search, nan_calls):
+    """A linear-elastic block (4 x 4 cells) compressed oedometrically by 1e-3 of its height in
+    one quasi-static step, whose trial stress is NaN at the residual evaluations numbered in
+    `nan_calls` (0: the step's first): (sim, integrator, the constrained modulus M, eps)."""
+    from dolfinx import mesh
+    from mpi4py import MPI
+    E, nu, eps = 1e6, 0.3, 1e-3
+    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [1, 1]], [4, 4],
+                                         mesh.CellType.quadrilateral))
+    p = fm.Particles.fill(grid, fm.LinearElastic(E=E, nu=nu, density=1e3), per_cell=2)
+    top = lambda x: np.isclose(x[:, 1], 1.0)
+    qs = fm.QuasiStatic(line_search=line_search, displacement=lambda x, t: np.column_stack(
+        [np.zeros(len(x)), np.where(top(x), -eps * t, 0.0)]))
+    sim = fm.Simulation(grid, p, qs, dt=1.0)
+    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 1.0), [0])
+    sim.fix(lambda x: np.isclose(x[:, 1], 0.0) | top(x), [1])
+    trial, calls = sim.trial_stress, [0]
+
+    def nan_trial(dF):
+        sig = trial(dF)
+        calls[0] += 1
+        return sig * np.nan if calls[0] - 1 in nan_calls else sig
+    sim.trial_stress = nan_trial
+    sim.max_dt_cuts = 0
+    return sim, qs, E * (1 - nu) / ((1 + nu) * (1 - 2 * nu)), eps
+
+
+def test_backtracking_steps_back_from_a_non_finite_residual():
+    """A Newton correction whose residual is not finite (NaN trial stress at the first
+    correction, on every rank) is halved like one that raises |R| (line_search=2; measured:
+    the step converges and gives the exact sigma_yy = -M eps); with the full step
+    (line_search=0) the error names the iteration; with "auto" the retry with backtracking
+    completes the step."""
+    from mpi4py import MPI
+    for ls, retries in ((2, 0), ("auto", 1)):
+        sim, qs, M, eps = _oedometer(ls, {1})
+        sim.run(t_end=1.0, progress=False)
+        assert qs.retries == retries
+        err = np.abs(sim.particles.stress[:, 1, 1] / (-M * eps) - 1.0)
+        assert sim.comm.allreduce(float(err.max(initial=0.0)), op=MPI.MAX) < 1e-8
+    sim, qs, M, eps = _oedometer(0, {1})
+    with pytest.raises(FloatingPointError, match="non-finite residual in Newton iteration 1"):
+        sim.run(t_end=1.0, progress=False)

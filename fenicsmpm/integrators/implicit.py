@@ -19,7 +19,8 @@ projection of the acceleration loses about 1 % of the energy per 5 periods of th
 5x the critical step; FLIP about 0.1 %). Quasi-static drops the inertia terms and ramps gravity over `load_steps` steps.
 Inactive (massless) nodes and Dirichlet dofs are constrained (unit diagonal, zero residual).
 Newton options (all implicit integrators): rtol, utol, max_iter, and line_search = k >= 0: a
-correction that raises |R| is halved up to k times (backtracking; 0: the full Newton step), or
+correction that raises |R| or makes it non-finite is halved up to k times (backtracking; 0:
+the full Newton step), or
 "auto" (the default): the full Newton step, and if Newton fails on a step (diverges, reaches
 max_iter or a non-finite residual) the same step once more from du = 0 with
 line_search = AUTO_LINE_SEARCH (6) before the step is given up (a dt cut, max_dt_cuts). Steps that
@@ -205,8 +206,10 @@ class _Newton:
             ghost.update(sim, sim.nodal["active"],
                          np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32))
 
-        def newton_residual(du):
-            """(R, |R|, fint, reaction, sig) at du; leaves sim._dF (and F-bar's dF0) at du."""
+        def newton_residual(du, it):
+            """(R, |R|, fint, reaction, sig) at du, Newton iteration `it`; leaves sim._dF (and
+            F-bar's dF0) at du. FloatingPointError (on every rank: |R| is global) when |R| is
+            not finite."""
             self.strain_increment(sim, du)
             sig = sim.trial_stress(sim._dF)
             first_piola(idx, sim._dF, sim.dynamic_stress(sig), P)
@@ -248,7 +251,7 @@ class _Newton:
             or reaches max_iter."""
             it = 0
             t1 = time.perf_counter()
-            R, rnorm, fint, reaction, sig = newton_residual(du)
+            R, rnorm, fint, reaction, sig = newton_residual(du, it)
             r0 = rnorm
             diverged = self.DIVERGED * max(r0, 1e-300)
             T["solve"] += time.perf_counter() - t1
@@ -305,11 +308,17 @@ class _Newton:
                 self.ksp_iterations += sys.iterations
                 T["assembly"] += t3 - t2
                 T["ksp"] += t4 - t3
-                # depth > 0: halve the correction (up to depth times) while it raises |R|
-                # (module docstring); 0: the full Newton step
+                # depth > 0: halve the correction (up to depth times) while it raises |R| or
+                # makes it non-finite (module docstring); 0: the full Newton step
                 alpha, prev = 1.0, rnorm
                 for k in range(depth + 1):
-                    R, rnorm, fint, reaction, sig = newton_residual(du + alpha * delta)
+                    try:
+                        R, rnorm, fint, reaction, sig = newton_residual(du + alpha * delta, it + 1)
+                    except FloatingPointError:
+                        if k == depth:
+                            raise
+                        alpha *= 0.5
+                        continue
                     if rnorm <= prev or k == depth:
                         break
                     alpha *= 0.5
