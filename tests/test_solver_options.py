@@ -102,6 +102,41 @@ def test_quasi_static_keeps_its_lu_factors(monkeypatch, mumps_from):
     assert np.max(np.abs(res[0] - res[1])) <= 1e-10 * np.max(np.abs(res[1]))
 
 
+def test_failing_kept_factors_back_off(monkeypatch):
+    """LinearSystem._solve_lagged when GMRES never converges with kept factors (a plastic
+    tangent that changes at every Newton iteration): after a failure the rest of the step and
+    the next 1, 2, 4, ... LAG_BACKOFF_MAX steps factor afresh at every solve, so the kept
+    factors are tried in steps 1, 3, 6, 11, 20, 37, 54 of 60 (7 tries, 7 wasted GMRES runs);
+    where they serve, every step after its first solve uses them."""
+    from dolfinx import mesh
+    from mpi4py import MPI
+    from fenicsmpm.integrators import linear_system as ls
+    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [1, 1]], [2, 2],
+                                         mesh.CellType.quadrilateral))
+    for serve in (False, True):
+        system = ls.LinearSystem(grid)
+        tried = []
+
+        def once(fresh, tried=tried, serve=serve):
+            tried.append(fresh)
+            system.iterations = 1 if fresh or serve else ls.LAGGED["ksp_max_it"]
+            return 1 if fresh or serve else -3         # -3: DIVERGED_ITS
+        monkeypatch.setattr(system, "_lagged_once", once)
+        tries = []
+        for step in range(1, 61):
+            system.new_step()
+            n0 = len(tried)
+            for _ in range(4):                         # 4 Newton solves a step
+                assert system._solve_lagged() > 0
+            if not all(tried[n0:]):
+                tries.append(step)
+                # fresh, kept (failing: the same solve again, fresh), fresh, fresh
+                assert tried[n0:] == ([True, False, False, False] if serve else
+                                      [True, False, True, True, True]), tried[n0:]
+        assert tries == (list(range(1, 61)) if serve else [1, 3, 6, 11, 20, 37, 54]), tries
+        system.destroy()
+
+
 def test_command_line_options_reach_the_ksp():
     argv = ["--out", "dir", "-fenicsmpm_ksp_type", "gmres", "-fenicsmpm_ksp_rtol", "1e-11",
             "-fenicsmpm_pc_type", "jacobi"]

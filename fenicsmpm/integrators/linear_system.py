@@ -25,9 +25,17 @@ ITERATIVE = {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10, "ksp_
 # the quasi-static default (LinearSystem iterative=False): the LU factorization of the step's
 # first tangent (solved with it alone), kept as GMRES's preconditioner for its further Newton
 # iterations: computed again once the solves since took more than LAG_ITERATIONS GMRES
-# iterations in all, or when GMRES fails with it (at ksp_max_it); the true residual to 1e-12
-# (a near-singular tangent, a footing near collapse, needs a solve as accurate as LU's)
+# iterations in all, or when GMRES fails with it (at ksp_max_it). Once GMRES has failed with
+# kept factors, every further solve of that step and of the next k steps factors afresh, k
+# doubling with each such failure up to LAG_BACKOFF_MAX (back to 0 when kept factors serve
+# again): a plastic tangent that changes at every iteration makes each try a loss (the W5
+# footing of tests/test_implicit_footing.py, 4.5 cells under B/2, 40 steps, serial, one
+# thread, 2026-12-05: 83-85 s without this, 135 fresh factors in 169 solves, 524 KSP
+# iterations; with it 65-68 s, 167 in 173, 215; one try every step 75 s; LU at every solve
+# 66 s; the collapse pressure the same to 1e-7); the true residual to 1e-12 (a near-singular
+# tangent, a footing near collapse, needs a solve as accurate as LU's)
 LAG_ITERATIONS = 30
+LAG_BACKOFF_MAX = 16
 LAGGED = {"ksp_type": "gmres", "pc_type": "lu", "ksp_pc_side": "right", "ksp_rtol": 1e-12,
           "ksp_max_it": LAG_ITERATIONS // 2}
 
@@ -135,6 +143,9 @@ class LinearSystem:
         self.lagged = not iterative and defaults    # LAGGED: the LU is kept between solves
         self.factorizations = 0           # LU factorizations computed (lagged only)
         self._factored = False
+        self._lag_failed = False          # no kept factors in this step (LAGGED's comment)
+        self._backoff = 0                 # steps without kept factors after the last failure
+        self._skip = 0                    # of which still to come
         self._since = 0                   # GMRES iterations since the last factorization
         merged = (dict(ITERATIVE) if self.fallback
                   else _direct(grid.comm, self.A.getSize()[0], self.lagged, mumps))
@@ -175,7 +186,7 @@ class LinearSystem:
         on every rank (collective), never a dropped or misplaced term. The rows of particles
         whose nodes have not changed since the last call are kept (kt.stiffness_plan). A new
         step's first solve computes fresh LU factors (lagged default, _solve_lagged)."""
-        self._factored = False
+        self.new_step()
         shape = nodes.shape + (nodes.shape[1],)
         last = self._last_plan
         if last is not None and last[1].shape == shape:
@@ -289,20 +300,33 @@ class LinearSystem:
         self.iterations = self.ksp.getIterationNumber()
         return self.ksp.getConvergedReason()
 
+    def new_step(self):
+        """A new step (plan): its first solve factors afresh, and so do all its solves while a
+        failure of kept factors holds them off (LAGGED's comment, _solve_lagged)."""
+        self._factored = False
+        self._lag_failed = self._skip > 0
+        self._skip = max(0, self._skip - 1)
+
     def _solve_lagged(self):
         """The lagged default (LAGGED): fresh LU factors solve alone (preonly) at a step's
         first solve (plan), for the next solve once the solves since the last factorization
         took more than LAG_ITERATIONS iterations in all, and at once, the solve repeated, when
         GMRES fails with the old factors; otherwise GMRES (right-preconditioned: the true
         residual to rtol 1e-12) with the kept factors as its preconditioner. Deterministic:
-        the same run factors at the same solves. Measured: docs/guide/integrators.md."""
-        fresh = not self._factored
+        the same run factors at the same solves. Once GMRES has failed with kept factors in a
+        step, the step's further solves, and those of the next steps, factor afresh (LAGGED's
+        comment, LAG_BACKOFF_MAX). Measured:
+        docs/guide/integrators.md."""
+        fresh = not self._factored or self._lag_failed
         reason = self._lagged_once(fresh)
         if reason < 0 and not fresh:               # the old factors no longer serve
             its = self.iterations
             reason = self._lagged_once(True)
             self.iterations += its
-            fresh = True
+            fresh = self._lag_failed = True
+            self._backoff = self._skip = min(2 * self._backoff or 1, LAG_BACKOFF_MAX)
+        elif not fresh:
+            self._backoff = 0
         self.factorizations += fresh
         self._factored = True
         self._since = 0 if fresh else self._since + self.iterations
