@@ -22,9 +22,9 @@ if "PYTEST_XDIST_WORKER" in os.environ:
     # default_threads): numba's threads are set below, BLAS/OpenMP's here (before numpy
     # starts them). Measured 2026-12-05 on 2 cores: test_fbar.py's quick bearing-capacity
     # case took 118 s with 2 workers x 2 threads, 40 s alone on 1 thread, 48 s alone on 2.
-    _SHARE = str(max(1, (os.cpu_count() or 1) // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1"))))
+    _SHARE = max(1, (os.cpu_count() or 1) // int(os.environ.get("PYTEST_XDIST_WORKER_COUNT", "1")))
     for _k in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
-        os.environ.setdefault(_k, _SHARE)
+        os.environ.setdefault(_k, str(_SHARE))
     for _k in list(os.environ):
         if (_k.startswith(("PMIX_", "ORTE_")) or _k.startswith("OMPI_") and not _k.startswith("OMPI_MCA_")
                 or _k.startswith(("OMPI_MCA_orte_", "OMPI_MCA_ess", "OMPI_MCA_pmix"))):
@@ -36,7 +36,7 @@ from mpi4py import MPI
 
 if "PYTEST_XDIST_WORKER" in os.environ and "NUMBA_NUM_THREADS" not in os.environ:
     import numba
-    numba.set_num_threads(int(_SHARE))     # the cap stays every core: tests may ask for 2
+    numba.set_num_threads(_SHARE)     # the cap stays every core: tests may ask for 2
 
 
 def _seeded_partitions(seed):

@@ -231,19 +231,12 @@ def test_implicit_fbar_oedometer_is_exact(shape):
     average; 1.51e-3 without F-bar: cpGIMP's own error, not F-bar's: the compressed body's top
     lies eps H inside the top cell row, so the domains there fall short of the nodes' support
     by O(eps H / h)); Newton converges in at most 3 iterations per step."""
-    from dolfinx import mesh
     from mpi4py import MPI
-    E, nu, eps = 1e6, 0.49, 1e-3
-    M = E * (1 - nu) / ((1 + nu) * (1 - 2 * nu))
-    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [1, 1]], [4, 4],
-                                         mesh.CellType.quadrilateral))
-    p = fm.Particles.fill(grid, fm.LinearElastic(E=E, nu=nu, density=1e3), per_cell=2)
-    top = lambda x: np.isclose(x[:, 1], 1.0)
-    qs = fm.QuasiStatic(displacement=lambda x, t: np.column_stack(
-        [np.zeros(len(x)), np.where(top(x), -eps * t, 0.0)]))
-    sim = fm.Simulation(grid, p, qs, dt=0.5, fbar=True, shape=shape)
-    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 1.0), [0])
-    sim.fix(lambda x: np.isclose(x[:, 1], 0.0) | top(x), [1])
+    from scenes import oedometric_block, pushed_top
+    eps = 1e-3
+    qs = fm.QuasiStatic(displacement=pushed_top(eps))
+    sim, M = oedometric_block(qs, nu=0.49, dt=0.5, fbar=True, shape=shape)
+    p = sim.particles
     sim.run(t_end=1.0, progress=False)
     assert sim.shape == shape and max(qs.iterations) <= 3, qs.iterations
     err = np.abs(p.stress[:, 1, 1] / (-M * eps) - 1.0)

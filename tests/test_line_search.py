@@ -61,18 +61,10 @@ def _oedometer(line_search, nan_calls):
     """A linear-elastic block (4 x 4 cells) compressed oedometrically by 1e-3 of its height in
     one quasi-static step, whose trial stress is NaN at the residual evaluations numbered in
     `nan_calls` (0: the step's first): (sim, integrator, the constrained modulus M, eps)."""
-    from dolfinx import mesh
-    from mpi4py import MPI
-    E, nu, eps = 1e6, 0.3, 1e-3
-    grid = fm.Grid(mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [1, 1]], [4, 4],
-                                         mesh.CellType.quadrilateral))
-    p = fm.Particles.fill(grid, fm.LinearElastic(E=E, nu=nu, density=1e3), per_cell=2)
-    top = lambda x: np.isclose(x[:, 1], 1.0)
-    qs = fm.QuasiStatic(line_search=line_search, displacement=lambda x, t: np.column_stack(
-        [np.zeros(len(x)), np.where(top(x), -eps * t, 0.0)]))
-    sim = fm.Simulation(grid, p, qs, dt=1.0)
-    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 1.0), [0])
-    sim.fix(lambda x: np.isclose(x[:, 1], 0.0) | top(x), [1])
+    from scenes import oedometric_block, pushed_top
+    eps = 1e-3
+    qs = fm.QuasiStatic(line_search=line_search, displacement=pushed_top(eps))
+    sim, M = oedometric_block(qs)
     trial, calls = sim.trial_stress, [0]
 
     def nan_trial(dF):
@@ -81,7 +73,7 @@ def _oedometer(line_search, nan_calls):
         return sig * np.nan if calls[0] - 1 in nan_calls else sig
     sim.trial_stress = nan_trial
     sim.max_dt_cuts = 0
-    return sim, qs, E * (1 - nu) / ((1 + nu) * (1 - 2 * nu)), eps
+    return sim, qs, M, eps
 
 
 def test_backtracking_steps_back_from_a_non_finite_residual():

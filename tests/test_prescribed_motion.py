@@ -2,12 +2,11 @@
 issue 21) and the reactions (sim.reaction): a displacement-controlled oedometric element."""
 import numpy as np
 import pytest
-from dolfinx import mesh
 from mpi4py import MPI
 
 import fenicsmpm as fm
 
-E, NU, RHO = 1e6, 0.3, 1000.0
+E, NU = 1e6, 0.3                                  # scenes.oedometric_block
 M = E * (1 - NU) / ((1 + NU) * (1 - 2 * NU))     # constrained modulus
 DELTA, T = 1e-3, 0.5                              # top settlement and loading time
 
@@ -15,19 +14,15 @@ DELTA, T = 1e-3, 0.5                              # top settlement and loading t
 def _oedometer(scheme):
     """A 1 m x 1 m elastic block on a fixed base, rollers on its sides, its top nodes pushed
     down by DELTA (1 - cos(pi t / T)) / 2 (starts and ends at rest)."""
-    msh = mesh.create_rectangle(MPI.COMM_WORLD, [[0, 0], [1, 1]], [10, 10], mesh.CellType.quadrilateral)
-    grid = fm.Grid(msh)
-    p = fm.Particles.fill(grid, fm.LinearElastic(E=E, nu=NU, density=RHO), per_cell=2)
-    top = lambda x: np.isclose(x[:, 1], 1.0)
+    from scenes import oedometric_block, top
 
     def u(x, t):
         d = np.zeros_like(x)
         d[:, 1] = -DELTA * 0.5 * (1 - np.cos(np.pi * min(t, T) / T)) * top(x)
         return d
 
-    sim = fm.Simulation(grid, p, fm.Explicit(scheme, displacement=u), dt="auto")
-    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 1.0), [0])
-    sim.fix(lambda x: np.isclose(x[:, 1], 0.0) | top(x), [1])
+    sim, m = oedometric_block(fm.Explicit(scheme, displacement=u), cells=10, nu=NU, dt="auto")
+    assert m == M
     return sim, top
 
 

@@ -143,9 +143,8 @@ class LinearSystem:
         self.lagged = not iterative and defaults    # LAGGED: the LU is kept between solves
         self.factorizations = 0           # LU factorizations computed (lagged only)
         self._factored = False
-        self._lag_failed = False          # no kept factors in this step (LAGGED's comment)
         self._backoff = 0                 # steps without kept factors after the last failure
-        self._skip = 0                    # of which still to come
+        self._skip = 0                    # steps left without them, this one included
         self._since = 0                   # GMRES iterations since the last factorization
         merged = (dict(ITERATIVE) if self.fallback
                   else _direct(grid.comm, self.A.getSize()[0], self.lagged, mumps))
@@ -304,7 +303,6 @@ class LinearSystem:
         """A new step (plan): its first solve factors afresh, and so do all its solves while a
         failure of kept factors holds them off (LAGGED's comment, _solve_lagged)."""
         self._factored = False
-        self._lag_failed = self._skip > 0
         self._skip = max(0, self._skip - 1)
 
     def _solve_lagged(self):
@@ -315,16 +313,16 @@ class LinearSystem:
         residual to rtol 1e-12) with the kept factors as its preconditioner. Deterministic:
         the same run factors at the same solves. Once GMRES has failed with kept factors in a
         step, the step's further solves, and those of the next steps, factor afresh (LAGGED's
-        comment, LAG_BACKOFF_MAX). Measured:
-        docs/guide/integrators.md."""
-        fresh = not self._factored or self._lag_failed
+        comment, LAG_BACKOFF_MAX). Measured: docs/guide/integrators.md."""
+        fresh = not self._factored or self._skip > 0
         reason = self._lagged_once(fresh)
         if reason < 0 and not fresh:               # the old factors no longer serve
             its = self.iterations
             reason = self._lagged_once(True)
             self.iterations += its
-            fresh = self._lag_failed = True
-            self._backoff = self._skip = min(2 * self._backoff or 1, LAG_BACKOFF_MAX)
+            fresh = True
+            self._backoff = min(2 * self._backoff or 1, LAG_BACKOFF_MAX)
+            self._skip = self._backoff + 1
         elif not fresh:
             self._backoff = 0
         self.factorizations += fresh
