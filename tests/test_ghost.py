@@ -94,3 +94,22 @@ def test_ghost_refuses_periodic_grids():
     sim.fix(lambda x: np.abs(x[:, 1]) < 1e-9)
     with pytest.raises(NotImplementedError, match="periodic"):
         sim.step()
+
+
+def test_penalised_faces_widen_the_pattern_only_there():
+    """_half_filled's penalised faces: the 8 under its quarter-full row (y = 0.5) and the 7
+    between that row's cells. The tangent's pattern is the cells' (one ring: 25 x 25 node pairs
+    on the 9 x 9 nodes) plus the node pairs those faces' cell pairs add: 2 x 25 across y = 0.5
+    (x-columns at most one apart, rows y = 0.375 and 0.625) and 2 x 28 along the row (x-columns
+    two apart), not a second cell ring everywhere (39 x 39 node pairs)."""
+    from petsc4py import PETSc
+    sim = _half_filled(ghost=0.01)
+    sim.fix(lambda x: np.abs(x[:, 1]) < 1e-9)
+    sim.run(steps=1)
+    system, ghost = sim.integrator.system, sim.integrator._ghost
+    assert system.rings == 1
+    owned = sim.grid.mesh.topology.index_map(1).size_local
+    assert sim.comm.allreduce(int(np.count_nonzero(ghost._used < owned))) == 15
+    nz = system.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
+    assert nz == 4 * (25 * 25 + 2 * 25 + 2 * 28), nz
+    assert sim.comm.allreduce(bool(np.all(np.isfinite(sim.particles.u))), op=MPI.LAND)

@@ -18,7 +18,13 @@ Newton's residual gets -G du and its Jacobian +G. The term acts on the step's in
 (updated Lagrangian: nothing accumulates), vanishes for a field linear across the face and is
 of order gamma h in the converged solution. One UFL form, compiled once; the cell indicators
 are DG0 functions set every step (the owned cells from their own particles, then scattered to
-the ghost cells)."""
+the ghost cells).
+
+The form is integrated over the penalised facets only (meshtags, renewed when the set
+changes), so G couples only the nodes of those facets' cell pairs (`pairs`), and the tangent's
+pattern grows by just those pairs (LinearSystem.extend) instead of a second cell ring
+everywhere: on the W5 footing of tests/test_implicit_footing.py an LU factorization of the
+standard family's tangent took 0.29 s with the two-ring pattern against 0.09 s with one."""
 import numpy as np
 import ufl
 from dolfinx import fem
@@ -46,12 +52,20 @@ class GhostPenalty:
         n, h = ufl.FacetNormal(msh), ufl.CellDiameter(msh)
         u, w = ufl.TrialFunction(grid.V), ufl.TestFunction(grid.V)
         a, c = self.active, self.poor
-        weight = a("+") * a("-") * ufl.max_value(c("+"), c("-"))
-        self.form = fem.form(float(factor) * M * ufl.avg(h) * weight
-                             * ufl.inner(ufl.jump(ufl.grad(u), n), ufl.jump(ufl.grad(w), n))
-                             * ufl.dS)
-        self.G = dolfinx.fem.petsc.create_matrix(self.form)
-        self.Gz = None
+        weight = a("+") * a("-") * ufl.max_value(c("+"), c("-"))     # 1 on the facets used
+        self._integrand = (float(factor) * M * ufl.avg(h) * weight
+                           * ufl.inner(ufl.jump(ufl.grad(u), n), ufl.jump(ufl.grad(w), n)))
+        self._msh = msh
+        tdim = msh.topology.dim
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        f2c = msh.topology.connectivity(tdim - 1, tdim)
+        off = f2c.offsets
+        self._facets = np.flatnonzero(np.diff(off) == 2).astype(np.int32)   # interior, local
+        self._facet_cells = f2c.array[off[self._facets][:, None] + np.arange(2)]
+        self._used = None               # the local facets integrated (penalised)
+        self.version = 0                # counts changes of the set (collective)
+        self.pairs = np.empty((0, 2), dtype=np.int64)
+        self.G = self.Gz = None
         vol = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(Q) * ufl.dx))
         vol.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.volume = vol.array.copy()          # owned cells
@@ -74,6 +88,7 @@ class GhostPenalty:
         poor[:own] = filled < self.fill * self.volume
         self.poor.x.array[:] = poor
         self.poor.x.scatter_forward()
+        self._select(grid)
         self.G.zeroEntries()
         dolfinx.fem.petsc.assemble_matrix(self.G, self.form)
         self.G.assemble()
@@ -83,6 +98,36 @@ class GhostPenalty:
             self.G.copy(self.Gz, structure=PETSc.Mat.Structure.SAME_NONZERO_PATTERN)
         self.Gz.zeroRowsColumnsLocal(constrained_owned_dofs, diag=0.0)
 
+    def _select(self, grid):
+        """The penalised facets: interior, both cells active, one poorly filled. When the set
+        changes anywhere (collective), the form is restricted to the new set (dS with meshtags;
+        dolfinx integrates the owned ones), G gets its pattern and `pairs` the node pairs of
+        their cell pairs (every local one, the owned and the ghost facets)."""
+        from dolfinx.mesh import meshtags
+        fc, act, poor = self._facet_cells, self.active.x.array, self.poor.x.array
+        use = (act[fc[:, 0]] > 0) & (act[fc[:, 1]] > 0) & ((poor[fc[:, 0]] > 0) | (poor[fc[:, 1]] > 0))
+        used = self._facets[use]
+        changed = self._used is None or not np.array_equal(used, self._used)
+        comm = grid.comm
+        if comm.size > 1:
+            changed = comm.allreduce(changed)
+        if not changed:
+            return
+        self._used = used
+        tags = meshtags(self._msh, self._msh.topology.dim - 1, used, np.ones(len(used), dtype=np.int32))
+        self.ufl_form = self._integrand * ufl.Measure("dS", domain=self._msh, subdomain_data=tags)(1)
+        self.form = fem.form(self.ufl_form)
+        for mat in (self.G, self.Gz):
+            if mat is not None:
+                mat.destroy()
+        self.G = dolfinx.fem.petsc.create_matrix(self.form)
+        self.Gz = None
+        cn = grid.cell_nodes.astype(np.int64)
+        a, b = cn[fc[use, 0]], cn[fc[use, 1]]
+        nv = cn.shape[1]
+        self.pairs = np.column_stack([np.repeat(a, nv, axis=1).ravel(), np.tile(b, (1, nv)).ravel()])
+        self.version += 1
+
     def force(self, du):
         """G du as a nodal array (n_nodes, gdim), complete on every rank."""
         self.x.x.array[:] = du.ravel()
@@ -91,6 +136,6 @@ class GhostPenalty:
         return self.y.x.array.reshape(du.shape).copy()
 
     def destroy(self):
-        self.G.destroy()
-        if self.Gz is not None:
-            self.Gz.destroy()
+        for mat in (self.G, self.Gz):
+            if mat is not None:
+                mat.destroy()

@@ -95,12 +95,10 @@ class _Newton:
         if sim.fbar and sim.axisymmetric:          # particle layers: SetupMixin.add_boundary
             raise NotImplementedError(f"{type(self).__name__}: fbar=True needs a plane or 3D "
                                       f"grid (got an axisymmetric grid)")
-        rings = stencil_rings(sim)
         if self.ghost > 0:                  # facet terms couple the nodes of two cells
             from .ghost import GhostPenalty
             self._ghost = GhostPenalty(sim, self.ghost, self.ghost_fill)
-            rings = max(rings, 2)
-        self.system = self._system(sim, rings, shape)
+        self.system = self._system(sim, stencil_rings(sim), shape)
 
     def _system(self, sim, rings, shape, iterative=None):
         """The LinearSystem of this integrator's options with a pattern of `rings` cell rings
@@ -114,6 +112,9 @@ class _Newton:
         (collective; logged on rank 0), up to MAX_RINGS, instead of stopping the run."""
         while True:
             try:
+                if self._ghost is not None:     # the cell pairs of the penalised facets
+                    g = self._ghost
+                    self.system.extend(g.version, g.pairs, g.ufl_form)
                 return self.system.plan(sim.nodes), self.system
             except OutsidePattern:
                 old = self.system
@@ -186,6 +187,10 @@ class _Newton:
         moving = bool(np.any(du[sim.fixed] != 0.0))     # the reactions then carry the load
         if sim.comm.size > 1:
             moving = sim.comm.allreduce(moving)
+        ghost = self._ghost
+        if ghost is not None:
+            ghost.update(sim, sim.nodal["active"],
+                         np.flatnonzero(constrained[: grid.n_owned_nodes * d]).astype(np.int32))
         t0 = time.perf_counter()
         plan, sys = self._plan(sim)
         T["assembly"] += time.perf_counter() - t0
@@ -201,10 +206,6 @@ class _Newton:
         motion = pm.targets(sim, sim.t + dt) if sim.particle_motions else None
         if motion is not None:
             f_motion = np.zeros((len(motion[0]), d))
-        ghost = self._ghost
-        if ghost is not None:
-            ghost.update(sim, sim.nodal["active"],
-                         np.flatnonzero(constrained[: sys.n_owned_dofs]).astype(np.int32))
 
         def newton_residual(du, it):
             """(R, |R|, fint, reaction, sig) at du, Newton iteration `it`; leaves sim._dF (and

@@ -113,9 +113,9 @@ class LinearSystem:
         else:
             self.nodeptr, self.adj = ring_adjacency(grid, self.rings)
             self.A = _pattern_matrix(grid, self.nodeptr, self.adj)
-        self.indptr, self.indices = kt.scalar_csr(self.nodeptr, self.adj, bs)
-        self.diag = kt.diagonal_slots(self.nodeptr, self.adj, bs)
-        self.data = np.zeros(len(self.indices))
+        self._base = (self.nodeptr, self.adj)
+        self._extension = None            # the key of the pairs added by extend()
+        self._scalar_csr()
         self.b = fem.Function(grid.V)
         self.x = fem.Function(grid.V)
         self.n_owned_dofs = grid.n_owned_nodes * bs
@@ -161,6 +161,40 @@ class LinearSystem:
             raise ValueError(f"petsc_options: PETSc did not use {sorted(unused)} (misspelt, or "
                              f"not an option of the chosen KSP/PC); see the PETSc manual pages of "
                              f"KSPSetFromOptions and PCSetFromOptions")
+
+    def _scalar_csr(self):
+        """The dof-level CSR arrays of the node pattern (nodeptr, adj)."""
+        self.indptr, self.indices = kt.scalar_csr(self.nodeptr, self.adj, self.bs)
+        self.diag = kt.diagonal_slots(self.nodeptr, self.adj, self.bs)
+        self.data = np.zeros(len(self.indices))
+
+    def extend(self, key, pairs, form):
+        """Add the local node pairs `pairs` ((k, 2), both orders) to a one-ring pattern, e.g. the
+        cell pairs of the facets a ghost penalty acts on (integrators.ghost); a pattern of two
+        rings or more holds every such pair already and stays. `form`: a bilinear UFL form on V
+        whose dolfinx sparsity holds those pairs on the ranks owning their rows; the matrix is
+        made from it plus the cells' mass form, so its pattern is the cells' and the form's.
+        `key` names the set of pairs: the same key again does nothing. Collective (every rank
+        passes the same key); a new pattern is factored afresh at its first solve."""
+        if self.rings > 1 or key == self._extension:
+            return
+        import scipy.sparse as sp
+        self._extension = key
+        n = self.grid.n_nodes
+        ptr, adj = self._base
+        both = np.vstack([pairs, pairs[:, ::-1]])
+        pattern = (sp.csr_matrix((np.ones(len(adj)), adj, ptr), shape=(n, n))
+                   + sp.csr_matrix((np.ones(len(both)), (both[:, 0], both[:, 1])), shape=(n, n))).tocsr()
+        pattern.sort_indices()
+        self.nodeptr = np.ascontiguousarray(pattern.indptr, dtype=np.int64)
+        self.adj = np.ascontiguousarray(pattern.indices, dtype=np.int64)
+        self._scalar_csr()
+        u, w = ufl.TrialFunction(self.grid.V), ufl.TestFunction(self.grid.V)
+        self.A.destroy()
+        self.A = dolfinx.fem.petsc.create_matrix(fem.form(ufl.inner(u, w) * ufl.dx + form))
+        self.ksp.setOperators(self.A)
+        self._last_plan = None
+        self._factored = False
 
     def _set_options(self, options, check=()):
         """KSPSetFromOptions with `options` (without the prefix) put into PETSc's options
