@@ -11,7 +11,7 @@ from numba import njit, prange
 
 from ..materials.piola import det3, inv3
 from .threads import PRANGE, add_chunks1, chunk, n_chunks, particle_chunks, scratch
-from .transfer import add_block, row_length, stiffness_entry
+from .transfer import add_block, row_length
 
 
 @njit(cache=True)
@@ -136,14 +136,20 @@ def _inverse_gradients(dF0, dN, lo, hi, J, h):
 def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan, nodeptr,
                 adj, constrained, data):
     """fbar_stiffness's terms of the particles of cells c0..c1-1 added to data; returns -1 or
-    the first of them with a node pair outside the pattern."""
+    a particle of the first cell with a node pair outside the pattern. Per particle the plain
+    block in two stages (G_a[r, c, L] = V_p s_p sum_J grad N_ap,J A_p[r, J, c, L], as
+    transfer._stiffness); the cell term sum_p V_p s_p Q_ap,r Hbar_b,c / sum_q V_q J_q is
+    gathered per cell node first (W[i, r] = sum over the particles' nodes a at i of
+    V_p s_p Q_ap,r) and added once per cell node pair (i, b): W[i] (x) Hbar_b / sum_q V_q J_q."""
     d = h.shape[2]
     nv = nodes.shape[1]
     U = np.empty(most * nv, dtype=np.int64)             # the nodes of a cell's particles
     Hb = np.empty((most * nv, d))
+    W = np.empty((most * nv, d))
+    G = np.empty((nv, d, d, d))
     block = np.empty((d, d))
     Q = np.empty((d, d))
-    qa = np.empty(d)
+    qa = np.empty((nv, d))
     bad = -1
     for c in range(c0, c1):
         if first[c + 1] == first[c]:
@@ -165,13 +171,17 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                     U[nu] = g
                     for k in range(d):
                         Hb[nu, k] = 0.0
+                        W[nu, k] = 0.0
                     nu += 1
                 for k in range(d):
                     Hb[u, k] += w * h[q, a, k]
+        any_avg = False
         for t in range(first[c], first[c + 1]):
             p = order[t]
             avg = J[p] > 0.0 and sj > 0.0              # as fbar(): no averaging otherwise
+            any_avg = any_avg or avg
             s = (sj / sv / J[p]) ** (1.0 / n) if avg else 1.0
+            vs = V[p] * s
             for r in range(d):
                 for Jx in range(d):
                     v = 0.0
@@ -181,30 +191,49 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                     Q[r, Jx] = v / n
             m = row_length(nodes, p)
             for a in range(m):
-                i = nodes[p, a]
-                lo, hi = nodeptr[i], nodeptr[i + 1]
+                for r in range(d):
+                    for cc in range(d):
+                        for L in range(d):
+                            v = 0.0
+                            for Jx in range(d):
+                                v += dN[p, a, Jx] * A[p, r, Jx, cc, L]
+                            G[a, r, cc, L] = vs * v
                 for r in range(d):
                     v = 0.0
                     for Jx in range(d):
                         v += dN[p, a, Jx] * Q[r, Jx]
-                    qa[r] = v if avg else 0.0
+                    qa[a, r] = vs * v if avg else 0.0
+                if avg:
+                    u = 0
+                    while U[u] != nodes[p, a]:
+                        u += 1
+                    for r in range(d):
+                        W[u, r] += qa[a, r]
+            for a in range(m):
+                i = nodes[p, a]
+                deg = nodeptr[i + 1] - nodeptr[i]
                 for b in range(m):
                     for r in range(d):
                         for cc in range(d):
-                            block[r, cc] = V[p] * s * (stiffness_entry(dN, A, p, a, b, r, cc, d)
-                                                       - qa[r] * h[p, b, cc])
-                    add_block(data, plan[p, a, b], hi - lo, i, nodes[p, b], d, constrained, block)
-                if not avg:
+                            v = 0.0
+                            for L in range(d):
+                                v += G[a, r, cc, L] * dN[p, b, L]
+                            block[r, cc] = v - qa[a, r] * h[p, b, cc]
+                    add_block(data, plan[p, a, b], deg, i, nodes[p, b], d, constrained, block)
+        if not any_avg:
+            continue
+        for x in range(nu):                             # the cell term, once per node pair
+            i = U[x]
+            lo, hi = nodeptr[i], nodeptr[i + 1]
+            for u in range(nu):
+                j = U[u]
+                k = np.searchsorted(adj[lo:hi], j)
+                if k >= hi - lo or adj[lo + k] != j:
+                    if bad < 0:
+                        bad = order[first[c]]
                     continue
-                for u in range(nu):
-                    j = U[u]
-                    k = np.searchsorted(adj[lo:hi], j)
-                    if k >= hi - lo or adj[lo + k] != j:
-                        if bad < 0:
-                            bad = p
-                        continue
-                    for r in range(d):
-                        for cc in range(d):
-                            block[r, cc] = V[p] * s * qa[r] * Hb[u, cc] / sj
-                    add_block(data, lo * d * d + k * d, hi - lo, i, j, d, constrained, block)
+                for r in range(d):
+                    for cc in range(d):
+                        block[r, cc] = W[x, r] * Hb[u, cc] / sj
+                add_block(data, lo * d * d + k * d, hi - lo, i, j, d, constrained, block)
     return bad
