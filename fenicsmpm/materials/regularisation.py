@@ -261,7 +261,8 @@ def regularise(sim, dt):
     """At the start of a step of dt: <kappa> (column nonlocal_column) of every particle of a
     material with a nonlocal_length, from the committed local kappa (column 0), when due
     (module docstring: every implicit step, every REFRESH l / c_p explicitly); collective.
-    Adds its wall time to sim.timers["nonlocal"]."""
+    Adds its wall time to sim.timers["nonlocal"] (from a barrier on: not the wait for the
+    other ranks to finish their step)."""
     import time
     p = sim.particles
     mats = [m for m in p.materials if getattr(m, "nonlocal_length", None) is not None
@@ -269,8 +270,10 @@ def regularise(sim, dt):
                  or refresh_due(sim.t, dt, REFRESH * m.nonlocal_length / m.p_wave_speed))]
     if not mats:
         return
-    t0 = time.perf_counter()
     comm, grid = sim.comm, sim.grid
+    if comm.size > 1:       # the wait for the slowest rank's step is not the averaging's cost
+        comm.Barrier()
+    t0 = time.perf_counter()
     origin = getattr(sim, "_nonlocal_origin", None)
     if origin is None:
         lo = np.ascontiguousarray(grid.node_x.min(axis=0) if grid.n_nodes
