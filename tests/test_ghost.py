@@ -17,21 +17,30 @@ from fenicsmpm.integrators.ghost import GhostPenalty
 from fenicsmpm.problems import localisation
 
 
-def _half_filled(ghost=0.0):
-    """1 x 1 m, 8 x 8 quads, particles below y = 0.5 and, in the row above, one particle per
-    cell (a quarter full)."""
-    msh = dmesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [1.0, 1.0]], [8, 8],
-                                 dmesh.CellType.quadrilateral)
+def _half_filled(ghost=0.0, cell="quadrilateral"):
+    """1 x 1 m, 8 x 8 quads (or triangles; 4 x 4 x 4 tetrahedra: 1 x 1 x 1 m, z up), particles
+    below y = 0.5 (z = 0.5) and, in the row above, one particle per cell (a quarter full; on
+    simplices those of Particles.fill's below the line)."""
+    if cell == "tetrahedron":
+        msh = dmesh.create_box(MPI.COMM_WORLD, [[0.0, 0.0, 0.0], [1.0, 1.0, 1.0]], [4, 4, 4],
+                               dmesh.CellType.tetrahedron)
+    else:
+        msh = dmesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [1.0, 1.0]], [8, 8],
+                                     getattr(dmesh.CellType, cell))
     grid = fm.Grid(msh)
+    d = grid.gdim
     pts = fm.Particles.fill(grid, fm.LinearElastic(E=1e6, nu=0.3, density=1000.0), per_cell=2,
-                            region=lambda x: (x[:, 1] < 0.5) | ((x[:, 1] < 0.55)
-                                                               & (x[:, 0] % 0.125 < 0.0625)))
+                            region=lambda x: (x[:, d - 1] < 0.5) | ((x[:, d - 1] < 0.55)
+                                                                   & (x[:, 0] % 0.125 < 0.0625)))
     return fm.Simulation(grid, pts, fm.QuasiStatic(ghost=ghost), dt=1.0, shape="mpm",
-                         gravity=(0.0, -10.0))
+                         gravity=(0.0,) * (d - 1) + (-10.0,))
 
 
-def test_ghost_force_is_consistent():
-    sim = _half_filled()
+@pytest.mark.parametrize("cell", ["quadrilateral", "triangle", "tetrahedron"])
+def test_ghost_force_is_consistent(cell):
+    """G du vanishes for a displacement linear in x (to 1e-12 of its value on a kink across
+    the filled surface), which it penalises, on every cell type."""
+    sim = _half_filled(cell=cell)
     sim.locate_and_shape()
     m = sim.nodal_mass()
     sim.grid.accumulate(m)
@@ -39,8 +48,10 @@ def test_ghost_force_is_consistent():
     g = GhostPenalty(sim, 0.01, 0.5)
     g.update(sim, active, np.zeros(0, dtype=np.int32))
     x = sim.grid.node_x
-    lin = np.column_stack([0.3 * x[:, 0] - 0.2 * x[:, 1] + 0.1, 0.5 * x[:, 1]])
-    kink = np.column_stack([np.zeros(len(x)), np.abs(x[:, 1] - 0.5)])
+    d = sim.gdim
+    lin = np.column_stack([0.3 * x[:, 0] - 0.2 * x[:, 1] + 0.1]
+                          + [0.5 * x[:, k] - 0.1 * x[:, 0] for k in range(1, d)])
+    kink = np.column_stack([np.zeros(len(x))] * (d - 1) + [np.abs(x[:, d - 1] - 0.5)])
     f_lin, f_kink = g.force(lin), g.force(kink)
     scale = sim.comm.allreduce(float(np.abs(f_kink).max()), op=MPI.MAX)
     assert scale > 0.0                                 # the poor row's faces are penalised
@@ -113,3 +124,19 @@ def test_penalised_faces_widen_the_pattern_only_there():
     nz = system.A.getInfo(PETSc.Mat.InfoType.GLOBAL_SUM)["nz_used"]
     assert nz == 4 * (25 * 25 + 2 * 25 + 2 * 28), nz
     assert sim.comm.allreduce(bool(np.all(np.isfinite(sim.particles.u))), op=MPI.LAND)
+
+
+@pytest.mark.parametrize("cell", ["quadrilateral", "triangle", "tetrahedron"])
+def test_penalty_step_on_every_cell_type(cell):
+    """A gravity step of _half_filled with the penalty (its faces' node pairs added to the
+    one-ring pattern) against one without: the settlement moves by less than 1 % (measured
+    -0.13 / -0.07 / +0.52 % on quadrilaterals / triangles / tetrahedra)."""
+    out = []
+    for ghost in (0.0, 0.01):
+        sim = _half_filled(ghost, cell)
+        d = sim.gdim
+        sim.fix(lambda x: np.abs(x[:, d - 1]) < 1e-9)
+        sim.run(steps=1)
+        out.append(sim.comm.allreduce(float(sim.particles.u[:, -1].min()), op=MPI.MIN))
+    assert sim.integrator.system.rings == 1
+    assert out[0] < -1e-3 and abs(out[1] / out[0] - 1.0) < 0.01, out

@@ -190,7 +190,7 @@ class LinearSystem:
         self.nodeptr = np.ascontiguousarray(pattern.indptr, dtype=np.int64)
         self.adj = np.ascontiguousarray(pattern.indices, dtype=np.int64)
         self._scalar_csr()
-        u, w = ufl.TrialFunction(self.grid.V), ufl.TestFunction(self.grid.V)
+        w, u = sorted(form.arguments(), key=lambda a: a.number())   # the form's own (test, trial)
         self.A.destroy()
         self.A = dolfinx.fem.petsc.create_matrix(fem.form(ufl.inner(u, w) * ufl.dx + form))
         self.ksp.setOperators(self.A)
