@@ -11,7 +11,7 @@ from numba import njit, prange
 
 from ..materials.piola import det3, inv3
 from .threads import PRANGE, add_chunks1, chunk, n_chunks, particle_chunks, scratch
-from .transfer import add_block, row_length
+from .transfer import add_block, row_length, stiffness_stage
 
 
 @njit(cache=True)
@@ -137,8 +137,7 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                 adj, constrained, data):
     """fbar_stiffness's terms of the particles of cells c0..c1-1 added to data; returns -1 or
     a particle of the first cell with a node pair outside the pattern. Per particle the plain
-    block in two stages (G_a[r, c, L] = V_p s_p sum_J grad N_ap,J A_p[r, J, c, L], as
-    transfer._stiffness); the cell term sum_p V_p s_p Q_ap,r Hbar_b,c / sum_q V_q J_q is
+    block in two stages (transfer.stiffness_stage with V_p s_p); the cell term sum_p V_p s_p Q_ap,r Hbar_b,c / sum_q V_q J_q is
     gathered per cell node first (W[i, r] = sum over the particles' nodes a at i of
     V_p s_p Q_ap,r) and added once per cell node pair (i, b): W[i] (x) Hbar_b / sum_q V_q J_q."""
     d = h.shape[2]
@@ -190,14 +189,8 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                             v += A[p, r, Jx, K, L] * dF0[p, K, L]
                     Q[r, Jx] = v / n
             m = row_length(nodes, p)
+            stiffness_stage(dN, A, p, m, vs, G)
             for a in range(m):
-                for r in range(d):
-                    for cc in range(d):
-                        for L in range(d):
-                            v = 0.0
-                            for Jx in range(d):
-                                v += dN[p, a, Jx] * A[p, r, Jx, cc, L]
-                            G[a, r, cc, L] = vs * v
                 for r in range(d):
                     v = 0.0
                     for Jx in range(d):

@@ -661,14 +661,19 @@ def add_block(data, base, deg, i, j, d, constrained, block):
 
 
 @njit(cache=True)
-def stiffness_entry(dN, A, p, a, b, r, c, d):
-    """sum_J,L grad N_ap,J A_p[r, J, c, L] grad N_bp,L: entry (r, c) of particle p's block
-    for the node pair (a, b) before the volume factor."""
-    s = 0.0
-    for J in range(d):
-        for L in range(d):
-            s += dN[p, a, J] * A[p, r, J, c, L] * dN[p, b, L]
-    return s
+def stiffness_stage(dN, A, p, m, scale, G):
+    """G[a, r, c, L] = scale sum_J grad N_ap,J A_p[r, J, c, L] for the first m nodes a of
+    particle p: the first stage of a particle's stiffness blocks (block (a, b)[r, c] =
+    sum_L G[a, r, c, L] grad N_bp,L)."""
+    d = G.shape[1]
+    for a in range(m):
+        for r in range(d):
+            for c in range(d):
+                for L in range(d):
+                    s = 0.0
+                    for J in range(d):
+                        s += dN[p, a, J] * A[p, r, J, c, L]
+                    G[a, r, c, L] = scale * s
 
 
 @njit(cache=True)
@@ -682,14 +687,7 @@ def _stiffness(D, nodes, dN, V, A, plan, nodeptr, constrained, lo, hi, data):
     block = np.empty((d, d))
     for p in range(lo, hi):
         m = row_length(nodes, p)             # the padding's blocks are zero
-        for a in range(m):
-            for r in range(d):
-                for c in range(d):
-                    for L in range(d):
-                        s = 0.0
-                        for J in range(d):
-                            s += dN[p, a, J] * A[p, r, J, c, L]
-                        G[a, r, c, L] = V[p] * s
+        stiffness_stage(dN, A, p, m, V[p], G)
         for a in range(m):
             i = nodes[p, a]
             deg = nodeptr[i + 1] - nodeptr[i]
