@@ -33,8 +33,8 @@ ITERATIVE = {"ksp_type": "gmres", "pc_type": "bjacobi", "ksp_rtol": 1e-10, "ksp_
 # thread, 2026-12-05: 83-85 s without this, 135 fresh factors in 169 solves, 524 KSP
 # iterations; with it 65-68 s, 167 in 173, 215; one try every step 75 s; LU at every solve
 # 66 s; the collapse pressure the same to 1e-7; before the ghost penalty's narrower pattern,
-# integrators.ghost); the true residual to 1e-12 (a near-singular
-# tangent, a footing near collapse, needs a solve as accurate as LU's)
+# integrators.ghost); the true residual to 1e-12 (a near-singular tangent, a footing near
+# collapse, needs a solve as accurate as LU's)
 LAG_ITERATIONS = 30
 LAG_BACKOFF_MAX = 16
 LAGGED = {"ksp_type": "gmres", "pc_type": "lu", "ksp_pc_side": "right", "ksp_rtol": 1e-12,

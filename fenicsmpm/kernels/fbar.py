@@ -137,9 +137,10 @@ def _fbar_cells(c0, c1, first, order, most, J, h, nodes, dN, V, A, dF0, n, plan,
                 adj, constrained, data):
     """fbar_stiffness's terms of the particles of cells c0..c1-1 added to data; returns -1 or
     a particle of the first cell with a node pair outside the pattern. Per particle the plain
-    block in two stages (transfer.stiffness_stage with V_p s_p); the cell term sum_p V_p s_p Q_ap,r Hbar_b,c / sum_q V_q J_q is
-    gathered per cell node first (W[i, r] = sum over the particles' nodes a at i of
-    V_p s_p Q_ap,r) and added once per cell node pair (i, b): W[i] (x) Hbar_b / sum_q V_q J_q."""
+    block in two stages (transfer.stiffness_stage with V_p s_p); the cell term
+    sum_p V_p s_p Q_ap,r Hbar_b,c / sum_q V_q J_q is gathered per cell node first (W[i, r] =
+    the sum over the particles' nodes a at i of V_p s_p Q_ap,r) and added once per cell node
+    pair (i, b): W[i] (x) Hbar_b / sum_q V_q J_q."""
     d = h.shape[2]
     nv = nodes.shape[1]
     U = np.empty(most * nv, dtype=np.int64)             # the nodes of a cell's particles
