@@ -61,14 +61,17 @@ venv: $(VENV)/.installed
 
 # The 2-rank pass first: its ranks compile the kernels once, at the same time; the serial pass
 # then starts warm (its second worker from a copy of the cache).
+# The serial pass of `make test` leaves out the tests marked heavy (long physics runs, listed
+# in pyproject.toml's markers): the 2-rank pass before it has run them with the same
+# assertions. `make test-serial` runs every test serially.
 test: $(VENV)/.installed deps-optional
 	timeout 1800 $(MPIRUN) $(PY) -m pytest -q --color=no tests
-	$(MAKE) --no-print-directory test-serial
+	$(MAKE) --no-print-directory test-serial SERIAL_MARKS="-m 'not heavy'"
 	$(MAKE) --no-print-directory docs
 
 test-serial: $(VENV)/.installed deps-optional
 	@if [ -n "$(XDIST)" ] && [ -d .numba-cache ]; then rm -rf .numba-cache-gw1 && cp -r .numba-cache .numba-cache-gw1; fi
-	$(PY) -m pytest -q --color=no $(XDIST) tests
+	$(PY) -m pytest -q --color=no $(XDIST) $(SERIAL_MARKS) tests
 
 test-mpi: $(VENV)/.installed
 	timeout 1800 $(MPIRUN) $(PY) -m pytest -q --color=no tests

@@ -17,9 +17,12 @@ ch. 4) with multi-velocity frictional contact (mu = 0.2), axisymmetric.
 - JSON and PNG are written. Serial and under mpirun -n 2."""
 import os
 
+import pytest
+
 from demo_helpers import exist_on_rank0, load_demo
 
 
+@pytest.mark.heavy
 def test_pile_driving_demo(shared_module_tmp_path):
     out = os.path.join(shared_module_tmp_path, "pile_driving")
     demo = load_demo("pile_driving")

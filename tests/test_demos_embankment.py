@@ -53,6 +53,7 @@ def runs(shared_module_tmp_path):
     return out
 
 
+@pytest.mark.heavy
 def test_outputs_and_finite_state(runs):
     for name, m in runs.items():
         assert exist_on_rank0(m["png"], m["csv"]), (name, m["png"], m["csv"])

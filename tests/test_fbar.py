@@ -19,6 +19,7 @@ import fenicsmpm as fm
 from fenicsmpm.kernels.fbar import fbar
 
 
+@pytest.mark.heavy
 def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     """The quick `bearing-capacity` bench case: its JSON, PNG and plateaus."""
     import os
@@ -195,6 +196,7 @@ def test_fbar_tangent_same_on_any_chunk_count(monkeypatch):
         assert np.max(np.abs(data - out[0])) <= 1e-13 * np.max(np.abs(out[0]))
 
 
+@pytest.mark.heavy
 def test_rough_and_smooth_contact_footings():
     """Tresca soil has the same limit under a smooth and a rough footing. With penalty
     contact (node-to-segment, problems.footing.strip_footing(algorithm="penalty")) the two

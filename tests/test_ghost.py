@@ -80,6 +80,7 @@ def test_full_cells_are_untouched():
     assert np.allclose(out[0], out[1], rtol=0, atol=1e-12 * np.abs(out[0]).max())
 
 
+@pytest.mark.heavy
 def test_softening_footing_through_its_particles():
     """The softening W5 footing (L = 0.25 m) pushed through its top particle row with the
     ghost penalty, line search and rtol 1e-6 (the bench localisation configuration) reaches

@@ -38,6 +38,7 @@ def column():
     return collapse(2.0, cells=8)
 
 
+@pytest.mark.heavy
 def test_collapse_finishes_and_comes_to_rest(column):
     r = column
     assert r["finished"], r["error"]
@@ -63,6 +64,7 @@ def test_mean_speed_is_the_mass_weighted_global_mean():
     assert p.mean_speed() == pytest.approx(2.5, rel=1e-14)
 
 
+@pytest.mark.heavy
 def test_cpgimp_with_3x3_particles_meets_lube():
     """shape="cpgimp" with 3 x 3 particles per cell and the separation gap (the bench's rows
     a<a>-cpgimp-ppc3) at a = 2 and the test's h = L0 / 8: run-out -1.8 %, height -4.6 %,
@@ -81,6 +83,7 @@ def test_cpgimp_with_3x3_particles_meets_lube():
 @pytest.mark.parametrize("options, runout, height, height_error",
                          [(dict(shape="cpgimp"), 2.361210, 1.257238, (-0.05, 0.05)),
                           (dict(separation=True), 2.428455, 1.150973, (-0.15, -0.10))])
+@pytest.mark.heavy
 def test_cpgimp_and_the_separation_gap(options, runout, height, height_error):
     """a = 2, the test's h = L0 / 8, 2 x 2 particles per cell: cpGIMP (the bench's
     RECOMMENDED) runs out -1.6 % and stands -4.7 %; with fm.MohrCoulomb(separation=True) (the

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 
+@pytest.mark.heavy
 def test_implicit_fbar_w5_footing_reaches_prandtl():
     """The seed 000 W5 strip footing (problems.localisation.strip_footing: weightless von
     Mises clay at its peak strength c_u = 10 kPa, nu = 0.41, smooth footing B/2 = 0.25 m under
@@ -30,6 +31,7 @@ def test_implicit_fbar_w5_footing_reaches_prandtl():
     assert q[False][-1] > 1.2 and q[False][-1] > q[False][20], q[False]
 
 
+@pytest.mark.heavy
 def test_w5_collapse_pressure_within_5_percent():
     """Issue 21's W5 check: the seed 000 W5 footing at its peak strength (weightless von
     Mises clay, nu = 0.41, E = 200 c_u, B/2 = 0.25 m; the implicit particle footing of the
@@ -83,6 +85,7 @@ def test_effective_half_width_of_the_discrete_footing():
     assert effective_half_width(0.0625, 0.25, "nodes") == pytest.approx(0.25)
 
 
+@pytest.mark.heavy
 def test_node_footing_acts_to_its_last_node():
     """The implicit node footing (strip_footing(footing="nodes")) on Prandtl's soil at 5 and
     5.5 cells under B/2 (its last node at B/2 and at B/2 - h/2): per unit of its effective

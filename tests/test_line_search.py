@@ -22,6 +22,7 @@ def _footing(line_search, rtol=1e-8):
         rtol=rtol)
 
 
+@pytest.mark.heavy
 def test_line_search_rescues_the_footing():
     """At Newton's tolerance 1e-6 (the localisation bench's): one full-suite run under
     `mpirun -n 2` stopped the line_search=6 run at step 27 with the default 1e-8, which the
@@ -36,6 +37,7 @@ def test_line_search_rescues_the_footing():
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
 
 
+@pytest.mark.heavy
 def test_auto_line_search_is_the_default_and_rescues_the_footing():
     """line_search="auto" (the default): the full step where it converges, the backtracking
     retry where it fails; the footing then runs to the end with the same plateau."""

@@ -99,6 +99,7 @@ def test_bad_input():
 
 
 @pytest.mark.parametrize("rough", [False, True])
+@pytest.mark.heavy
 def test_particle_footing_converges_on_prandtl(rough):
     """Prandtl's footing on weightless Tresca soil, implicit, pushed through its top
     particle row (problems.localisation.strip_footing(footing="particles"), 30 mm in 30

@@ -77,6 +77,7 @@ def test_block_on_30_degree_incline(mu, start, inclined_mesh):
 
 
 @pytest.mark.parametrize("theta,mu", [(0.0, 0.5), (30.0, 0.7), (30.0, 0.3)])
+@pytest.mark.heavy
 def test_rough_base_under_explicit_contact(theta, mu):
     """The same block as two bodies (fm.ExplicitContact, multi-velocity, mu = 0.5 between
     them): each body's field has its own contact status on the base. Flat base: no climb,
@@ -101,6 +102,7 @@ def test_rough_base_under_explicit_contact(theta, mu):
 @pytest.mark.parametrize("algorithm,mu,h", [("multi-velocity", 0.7, 0.05), ("multi-velocity", 0.3, 0.05),
                                             ("multi-velocity", 0.0, 0.05), ("penalty", 0.7, 0.05),
                                             ("penalty", 0.3, 0.1), ("penalty", 0.0, 0.1)])
+@pytest.mark.heavy
 def test_block_on_rigid_incline_body(algorithm, mu, h):
     """The incline as a rigid body, 30 deg, 0.5 s from the geostatic state. Multi-velocity
     (exact gap against the rigid body's particles, prescribed normal): mu = 0.7 sticks

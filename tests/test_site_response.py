@@ -34,6 +34,7 @@ def rigid_runs():
 
 
 @pytest.mark.parametrize("name", ["euler", "ga"])
+@pytest.mark.heavy
 def test_rigid_base_transfer_peaks(rigid_runs, name):
     """The first three peaks of |FFT(a_top)| / |FFT(a_base)| lie at (2n+1) V_s / (4H)
     within 3 %."""
