@@ -566,7 +566,10 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         if steps is None:
             if isinstance(t_end, bool) or not (isinstance(t_end, (int, float, np.floating))
                                                and math.isfinite(t_end) and t_end > self.t):
-                raise ValueError(f"run: 't_end' must be > current time {self.t}, got {t_end!r}")
+                raise ValueError(f"run: 't_end' is the end time, not a duration: it must be > the "
+                                 f"current time t = {self.t:.6g} s (time runs on across "
+                                 f"stages), got {t_end!r}; for a duration T pass "
+                                 f"t_end=sim.t + T")
             steps = int(math.ceil((t_end - self.t) / self.dt - 1e-9))
         elif isinstance(steps, bool) or not (isinstance(steps, (int, np.integer)) and steps >= 0):
             raise ValueError(f"run: 'steps' must be a non-negative integer, got {steps!r}")

@@ -121,8 +121,21 @@ def test_region_selecting_nothing(setup):
 def test_t_end_not_after_current_time(setup, t_end):
     grid, mat, pts = setup
     sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-4)
-    with pytest.raises(ValueError, match="'t_end' must be > current time"):
+    with pytest.raises(ValueError, match="'t_end' is the end time, not a duration: it must be "
+                                         "> the current time t = 0 s"):
         sim.run(t_end=t_end)
+
+
+def test_t_end_is_an_end_time_after_a_stage(setup):
+    """A later run (a stage) given a duration as t_end: the message gives the time reached and
+    how to ask for a duration."""
+    grid, mat, pts = setup
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-4)
+    sim.run(steps=3)
+    with pytest.raises(ValueError, match=r"current time t = 0\.0003 s \(time runs on across "
+                                         r"stages\), got 0\.0002; for a duration T pass "
+                                         r"t_end=sim\.t \+ T"):
+        sim.run(t_end=2e-4)
 
 
 def test_misspelt_petsc_option_is_reported(setup):

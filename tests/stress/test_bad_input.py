@@ -250,7 +250,8 @@ CASES = [
     ("run-nothing", lambda: sim().run(), ValueError,
      r"run: give exactly one of 't_end' or 'steps'"),
     ("run-t_end-past", lambda: sim().run(t_end=-1.0), ValueError,
-     r"run: 't_end' must be > current time 0.0, got -1.0"),
+     r"run: 't_end' is the end time, not a duration: it must be > the current time t = 0 s "
+     r"\(time runs on across stages\), got -1.0; for a duration T pass t_end=sim.t \+ T"),
     ("run-t_end-inf", lambda: sim().run(t_end=math.inf), ValueError, r"run: 't_end'"),
     ("run-steps-float", lambda: sim().run(steps=1.5), ValueError,
      r"run: 'steps' must be a non-negative integer, got 1.5"),
