@@ -4,6 +4,7 @@ boundaries, periodic sides, particle splitting, stages, observers and probes. Th
 register what the stages of the time loop (simulation.py) then apply."""
 import logging
 import math
+import warnings
 
 import numpy as np
 
@@ -158,7 +159,11 @@ class SetupMixin:
 
         initial_stress: keep the current stress as sigma_ini; from now on the internal force
           comes from sigma_dyn = sigma - sigma_ini while materials see the total stress, so
-          removing gravity together with sigma_ini leaves the body in equilibrium.
+          removing gravity together with sigma_ini leaves the body in equilibrium. A stage
+          that keeps (or sets) gravity with initial_stress=True on a stressed body loads it
+          with its weight a second time (it sinks under twice its weight): a RuntimeWarning
+          says so (rank 0); pass gravity=(0, 0), or initial_stress=False to go on under
+          gravity with the total stress. Collective.
         reset_displacement: measure particle displacements (and Robin spring displacements)
           from the start of the stage.
         gravity_ramp: ramp time T of this stage's gravity (see Simulation), None: no ramp."""
@@ -188,6 +193,18 @@ class SetupMixin:
         self.initial_stress = bool(initial_stress)
         if initial_stress:
             p.add_field("stress_initial", (3, 3))[:] = p.stress
+            stressed = bool(np.any(p.stress != 0.0))
+            if self.comm.size > 1:
+                from mpi4py import MPI
+                stressed = self.comm.allreduce(stressed, op=MPI.LOR)
+            if stressed and np.any(self.gravity != 0.0) and self.comm.rank == 0:
+                warnings.warn(f"start_stage: gravity {tuple(float(g) for g in self.gravity)} "
+                              f"acts in this stage while initial_stress=True balances the "
+                              f"current stress with sigma_ini, so the body carries its weight "
+                              f"a second time (it sinks as under twice its weight). Pass "
+                              f"gravity=(0, 0) for a stage on top of the static state (seed 000 "
+                              f"3.5), or initial_stress=False to go on under gravity with the "
+                              f"total stress", RuntimeWarning, stacklevel=2)
         if reset_displacement:
             p.u[:] = 0.0
             self.robin_u[:] = 0.0
