@@ -160,10 +160,11 @@ class SetupMixin:
         initial_stress: keep the current stress as sigma_ini; from now on the internal force
           comes from sigma_dyn = sigma - sigma_ini while materials see the total stress, so
           removing gravity together with sigma_ini leaves the body in equilibrium. A stage
-          that keeps (or sets) gravity with initial_stress=True on a stressed body loads it
-          with its weight a second time (it sinks under twice its weight): a RuntimeWarning
-          says so (rank 0); pass gravity=(0, 0), or initial_stress=False to go on under
-          gravity with the total stress. Collective.
+          that keeps (or sets) gravity, or keeps a traction that is not zero at its start,
+          with initial_stress=True on a stressed body loads it a second time (under gravity
+          it sinks as under twice its weight): a RuntimeWarning names those loads (rank 0);
+          pass gravity=(0, 0), or initial_stress=False to go on under the same loads with
+          the total stress. Collective.
         reset_displacement: measure particle displacements (and Robin spring displacements)
           from the start of the stage.
         gravity_ramp: ramp time T of this stage's gravity (see Simulation), None: no ramp."""
@@ -197,14 +198,19 @@ class SetupMixin:
             if self.comm.size > 1:
                 from mpi4py import MPI
                 stressed = self.comm.allreduce(stressed, op=MPI.LOR)
-            if stressed and np.any(self.gravity != 0.0) and self.comm.rank == 0:
-                warnings.warn(f"start_stage: gravity {tuple(float(g) for g in self.gravity)} "
-                              f"acts in this stage while initial_stress=True balances the "
-                              f"current stress with sigma_ini, so the body carries its weight "
-                              f"a second time (it sinks as under twice its weight). Pass "
-                              f"gravity=(0, 0) for a stage on top of the static state (seed 000 "
-                              f"3.5), or initial_stress=False to go on under gravity with the "
-                              f"total stress", RuntimeWarning, stacklevel=2)
+            loads = ([f"gravity {tuple(float(g) for g in self.gravity)}"]
+                     if np.any(self.gravity != 0.0) else [])
+            loads += [tr.name for tr in self.tractions
+                      if np.any(tr.at(self.t, self.gdim, nonfinite=ValueError) != 0.0)]
+            if stressed and loads and self.comm.rank == 0:
+                warnings.warn(f"start_stage: {' and '.join(loads)} act in this stage while "
+                              f"initial_stress=True balances the current stress with "
+                              f"sigma_ini, so the body carries these loads a second time (under "
+                              f"gravity it sinks as under twice its weight). Pass gravity=(0, 0) "
+                              f"(and tractions that are zero from now on) for a stage on top of "
+                              f"the static state (seed 000 3.5), or initial_stress=False to go "
+                              f"on under the same loads with the total stress", RuntimeWarning,
+                              stacklevel=2)
         if reset_displacement:
             p.u[:] = 0.0
             self.robin_u[:] = 0.0

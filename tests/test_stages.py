@@ -102,9 +102,10 @@ def test_keeping_gravity_with_initial_stress_warns_and_sinks():
     with warnings.catch_warnings(record=True) as rec:
         warnings.simplefilter("always")
         sim.start_stage(fm.Newmark(), dt=5e-3)
-    hit = [str(w.message) for w in rec if "carries its weight a second time" in str(w.message)]
+    hit = [str(w.message) for w in rec if "carries these loads a second time" in str(w.message)]
     assert len(hit) == (1 if sim.comm.rank == 0 else 0), hit
     if hit:
+        assert hit[0].startswith("start_stage: gravity (0.0, -10.0) act"), hit[0]
         assert "gravity=(0, 0)" in hit[0] and "initial_stress=False" in hit[0], hit[0]
     sim.run(steps=20)
     assert _max_speed(sim) > 0.5                     # measured 0.97 m/s (47 mm in 0.1 s)
@@ -117,3 +118,34 @@ def test_keeping_gravity_with_initial_stress_warns_and_sinks():
         assert not [w for w in rec if "second time" in str(w.message)], kw
         sim.run(steps=20)
         assert _max_speed(sim) < most, kw
+
+
+def test_a_traction_kept_with_initial_stress_warns():
+    """The same for a traction that is not zero at the stage's start (a strip load on a layer,
+    kept into a dynamic stage with gravity removed: it loads the layer again); one that is
+    zero from the stage on is not named."""
+    import warnings
+    from dolfinx import mesh as dmesh
+    msh = dmesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [2.0, 4.0]], [4, 8],
+                                 dmesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    pts = fm.Particles.fill(grid, fm.LinearElastic(E=20e6, nu=0.3, density=2000.0), per_cell=2)
+    sim = fm.Simulation(grid, pts, fm.QuasiStatic(load_steps=2), dt=1.0, gravity=(0, -9.81))
+    sim.fix(BASE)
+    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 2.0), [0])
+    strip = lambda x: np.isclose(x[:, 1], 4.0) & (x[:, 0] < 0.5 + 1e-9)     # noqa: E731
+    sim.add_traction(strip, lambda t: (0.0, -50e3))
+    sim.add_traction(strip, lambda t: (0.0, -1e4 if t < 1.5 else 0.0))
+    sim.run(steps=2)
+    with warnings.catch_warnings(record=True) as rec:
+        warnings.simplefilter("always")
+        sim.start_stage(fm.Newmark(), dt=5e-3, gravity=(0.0, 0.0))
+    hit = [str(w.message) for w in rec if "a second time" in str(w.message)]
+    assert len(hit) == (1 if sim.comm.rank == 0 else 0), hit
+    if hit:
+        assert hit[0].startswith("start_stage: add_traction #0 act in this stage"), hit[0]
+        assert "#1" not in hit[0], hit[0]
+    sim.run(t_end=sim.t + 0.2)
+    uy = sim.comm.allreduce(float(np.min(pts.u[:, 1], initial=0.0)), op=MPI.MIN)
+    print(f"\nstrip load kept into the stage: {uy * 1e3:.3f} mm more settlement in 0.2 s")
+    assert uy < -2.5e-3, uy                        # measured -5.002 mm (serial, 2 ranks)
