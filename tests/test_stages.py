@@ -7,7 +7,9 @@ from mpi4py import MPI
 import fenicsmpm as fm
 from fenicsmpm.problems.elastic import self_weight_column
 
-BASE = staticmethod(lambda x: np.isclose(x[:, 1], 0.0))
+def base(x):
+    """The bottom facet, y = 0."""
+    return np.isclose(x[:, 1], 0.0)
 
 
 def _gravity_stage(E=1e7):
@@ -30,8 +32,8 @@ def test_dynamic_stage_starts_in_equilibrium(integrator):
     assert sy < -0.9 * 2000 * 10 * 10 * 0.9          # the gravity stage did load the column
     integ = fm.Newmark() if integrator == "newmark" else fm.Explicit("MUSL")
     sim.start_stage(integ, dt=5e-3 if integrator == "newmark" else "auto", gravity=(0.0, 0.0))
-    sim.release(lambda x: np.isclose(x[:, 1], 0.0), [1])
-    sim.add_boundary(fm.Viscous(lambda x: np.isclose(x[:, 1], 0.0)))
+    sim.release(base, [1])
+    sim.add_boundary(fm.Viscous(base))
     sim.run(steps=50)
     v = _max_speed(sim)
     # scale: the speed a 1 % imbalance of the self-weight would cause in the same time
@@ -59,9 +61,9 @@ def test_dashpot_base_creeps_under_gravity_spring_dashpot_does_not():
     for kind in ("viscous", "viscoelastic"):
         sim, ex = _gravity_stage(E=1e9)             # c_p = 707 m/s: sinks ~0.14 m/s if viscous
         sim.start_stage(fm.Newmark(), dt=5e-3, initial_stress=False)
-        sim.release(lambda x: np.isclose(x[:, 1], 0.0), [1])
-        bc = (fm.Viscous(lambda x: np.isclose(x[:, 1], 0.0)) if kind == "viscous" else
-              fm.Viscoelastic(lambda x: np.isclose(x[:, 1], 0.0), r_b=10.0))
+        sim.release(base, [1])
+        bc = (fm.Viscous(base) if kind == "viscous" else
+              fm.Viscoelastic(base, r_b=10.0))
         sim.add_boundary(bc)
         probe = sim.probe((0.5, 0.25), ["displacement"])
         sim.run(steps=200)
@@ -131,7 +133,7 @@ def test_a_traction_kept_with_initial_stress_warns():
     grid = fm.Grid(msh)
     pts = fm.Particles.fill(grid, fm.LinearElastic(E=20e6, nu=0.3, density=2000.0), per_cell=2)
     sim = fm.Simulation(grid, pts, fm.QuasiStatic(load_steps=2), dt=1.0, gravity=(0, -9.81))
-    sim.fix(BASE)
+    sim.fix(base)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], 2.0), [0])
     strip = lambda x: np.isclose(x[:, 1], 4.0) & (x[:, 0] < 0.5 + 1e-9)     # noqa: E731
     sim.add_traction(strip, lambda t: (0.0, -50e3))

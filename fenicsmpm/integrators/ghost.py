@@ -61,7 +61,8 @@ class GhostPenalty:
         self.version = 0                # counts changes of the set (collective)
         self.pairs = np.empty((0, 2), dtype=np.int64)
         self.G = self.Gz = None
-        vol = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(self.poor.function_space) * ufl.dx))
+        Q = self.poor.function_space
+        vol = fem.petsc.assemble_vector(fem.form(ufl.TestFunction(Q) * ufl.dx))
         vol.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         self.volume = vol.array.copy()          # owned cells
         vol.destroy()
@@ -94,10 +95,10 @@ class GhostPenalty:
 
     def _select(self, grid, act, poor):
         """The penalised facets: interior, both cells active, one poorly filled (act, poor:
-        per local cell). When the set
-        changes anywhere (collective), the form is restricted to the new set (dS with meshtags;
-        dolfinx integrates the owned ones), G gets its pattern and `pairs` the node pairs of
-        their cell pairs (every local one, the owned and the ghost facets)."""
+        boolean per local cell). When the set changes anywhere (collective), the form is
+        restricted to the new set (dS with meshtags; dolfinx integrates the owned ones), G gets
+        its pattern and `pairs` the node pairs of their cell pairs (every local one, the owned
+        and the ghost facets)."""
         from dolfinx.mesh import meshtags
         fc = self._facet_cells
         use = act[fc[:, 0]] & act[fc[:, 1]] & (poor[fc[:, 0]] | poor[fc[:, 1]])
@@ -122,7 +123,8 @@ class GhostPenalty:
         cn = grid.cell_nodes.astype(np.int64)
         a, b = cn[fc[use, 0]], cn[fc[use, 1]]
         nv = cn.shape[1]
-        self.pairs = np.column_stack([np.repeat(a, nv, axis=1).ravel(), np.tile(b, (1, nv)).ravel()])
+        self.pairs = np.column_stack([np.repeat(a, nv, axis=1).ravel(),
+                                      np.tile(b, (1, nv)).ravel()])
         self.version += 1
 
     def force(self, du):
