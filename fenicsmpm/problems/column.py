@@ -15,9 +15,9 @@ Error norms (`errors`):
 Two ways to reach the static state:
   - implicit: fm.QuasiStatic(load_steps=40) (gravity ramped linearly over 40 load steps,
     as AMPLE; every shape family: wide ones get a wider matrix pattern);
-  - explicit (any shape family): `DampedExplicit`, an fm.Explicit whose particle velocities
-    are multiplied by exp(-c dt) after every step (mass-proportional viscous damping,
-    dv/dt = ... - c v), with gravity ramped by the seed-002 sine over T/2 (gravity_ramp=T);
+  - explicit (any shape family): `DampedExplicit`, an fm.Explicit with mass-proportional
+    viscous damping (the grid force -c m_i v_i in the momentum balance, dv/dt = ... - c v),
+    with gravity ramped by the seed-002 sine over T/2 (gravity_ramp=T);
     the damping does not change the static equilibrium. Defaults: c = 2 w1 (critical for the
     small-strain first mode w1 = pi c_p / (2 l0)), T = 2 pi / w1 (the first period), and the
     run lasts `explicit_time` = T / 2 + 16 / w1.
@@ -41,18 +41,13 @@ AMPLE = dict(height=50.0, E=1e4, nu=0.0, density=80.0, g=10.0)
 
 
 class DampedExplicit(Explicit):
-    """fm.Explicit with mass-proportional viscous damping: after each step the particle
-    velocities are multiplied by exp(-damping dt). `damping` (1/s) may be set after
+    """fm.Explicit with mass-proportional viscous damping: the grid force -damping m_i v_i^n
+    in every step's momentum balance (Explicit.damping). `damping` (1/s) may be set after
     construction (large_deformation_column sets it to 2 w1 when it is None)."""
 
     def __init__(self, scheme="MUSL", flip=None, damping=None, transfer=None):
         super().__init__(scheme, flip, transfer)
         self.damping = damping
-
-    def step(self, sim, dt):
-        super().step(sim, dt)
-        if self.damping:
-            sim.particles.v *= math.exp(-self.damping * dt)
 
 
 class ColumnExact:
