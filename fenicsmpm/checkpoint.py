@@ -6,8 +6,9 @@ Layout of a checkpoint directory `path`:
     path/step_00001200/meta.json   time, step, stage, integrator, sizes (rank 0)
     path/step_00001200/rank0.npz   this rank's particles (every migrating field, history
                                    variables included), its nodal state (Robin spring
-                                   displacements, integrator arrays such as a^n) keyed by global
-                                   node index, and its probe records
+                                   displacements, integrator arrays such as a^n, the contact
+                                   status of frictional boundaries) keyed by global node
+                                   index, and its probe records
 Every file is written under a temporary name and renamed; LATEST is switched by rank 0 only
 after all ranks have renamed their files, and older checkpoints are removed after that.
 
@@ -65,6 +66,9 @@ def write(sim, path, keep=1):
     arrays["node.robin_u"] = sim.robin_u[:n]
     for k, a in _integrator_arrays(sim.integrator).items():
         arrays[f"node.integrator.{k}"] = a[:n]
+    for j, fr in enumerate(sim.frictions):     # contact status of the frictional boundaries
+        for k, a in fr.checkpoint_arrays().items():
+            arrays[f"node.friction{j}.{k}"] = a[:n]
     for k, pr in enumerate(sim.probes):
         arrays[f"probe.{k}"] = np.array(pr.rows, dtype=np.float64).reshape(-1, len(pr.columns))
     _write_atomic(os.path.join(folder, f"rank{comm.rank}.npz"), lambda f: np.savez(f, **arrays))
@@ -165,9 +169,15 @@ def read(sim, path):
         pos = np.minimum(np.searchsorted(mine[order], theirs), len(mine) - 1)
         ok = mine[order][pos] == theirs
         local = order[pos[ok]]
+        for key in f.files:                    # frictional boundaries: arrays per body
+            if key.startswith("node.friction") and key not in targets:
+                targets[key] = np.full(grid.n_nodes, -1, dtype=f[key].dtype)
         for key, target in targets.items():
             if key in f.files:
                 target[local] = f[key][ok]
+    for j, fr in enumerate(sim.frictions):
+        prefix = f"node.friction{j}."
+        fr.restore_arrays({k[len(prefix):]: a for k, a in targets.items() if k.startswith(prefix)})
     # probes: records so far (kept by the rank that recorded them; rewritten by serial writers)
     for k, pr in enumerate(sim.probes):
         rows = [r for f in files for r in f[f"probe.{k}"].tolist()]

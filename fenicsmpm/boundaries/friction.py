@@ -198,6 +198,29 @@ class FrictionalBoundary:
         coulomb_project(self.nodes, self.normals, gap, dt, self.mu, v,
                         self.status if status is None else status, False)
 
+    def checkpoint_arrays(self):
+        """The contact status the next step starts from (`hold` before any `apply`), as nodal
+        arrays over the grid's local nodes (-1 off the boundary): "status", and "body<b>" per
+        body of fm.ExplicitContact. Written by Simulation.checkpoint, matched to the nodes by
+        their coordinates on restore (restore_arrays), so a restarted run starts each node
+        stuck, sliding or free as the continuous run does."""
+        def nodal(status):
+            a = np.full(self._grid.n_nodes, -1, dtype=np.int8)
+            a[self.nodes] = status
+            return a
+        out = {"status": nodal(self.status)}
+        out.update({f"body{b}": nodal(st) for b, st in self.body_status.items()})
+        return out
+
+    def restore_arrays(self, arrays):
+        """Set the contact status from nodal arrays written by checkpoint_arrays."""
+        for name, a in arrays.items():
+            st = np.ascontiguousarray(a[self.nodes], dtype=np.int8)
+            if name == "status":
+                self.status = st
+            else:
+                self.body_status[int(name[len("body"):])] = st
+
     def reaction(self):
         """Force the material exerted on the boundary in the last step (sum over ranks:
         collective). Its normal part is the base's normal load, its tangential part friction."""
