@@ -4,6 +4,8 @@ any moment leaves the previous checkpoint intact.
 Layout of a checkpoint directory `path`:
     path/LATEST                    name of the newest complete checkpoint (replaced atomically)
     path/step_00001200/meta.json   time, step, stage, integrator, sizes (rank 0)
+    path/step_00001200/energy.npz  the energy monitor's E_0 and history (rank 0; only with
+                                   Simulation.monitor_energy; each rank file has its work)
     path/step_00001200/rank0.npz   this rank's particles (every migrating field, history
                                    variables included), its nodal state (Robin spring
                                    displacements, integrator arrays such as a^n, the contact
@@ -69,6 +71,8 @@ def write(sim, path, keep=1):
     for j, fr in enumerate(sim.frictions):     # contact status of the frictional boundaries
         for k, a in fr.checkpoint_arrays().items():
             arrays[f"node.friction{j}.{k}"] = a[:n]
+    if sim.monitoring_work:
+        arrays["energy.work"] = sim._work      # this rank's share of the monitored work
     for k, pr in enumerate(sim.probes):
         arrays[f"probe.{k}"] = np.array(pr.rows, dtype=np.float64).reshape(-1, len(pr.columns))
     _write_atomic(os.path.join(folder, f"rank{comm.rank}.npz"), lambda f: np.savez(f, **arrays))
@@ -83,6 +87,10 @@ def write(sim, path, keep=1):
     shared = getattr(sim.integrator, "checkpoint_state", lambda: {})()
     if shared and comm.rank == 0:               # replicated on every rank: written once
         _write_atomic(os.path.join(folder, "integrator.npz"), lambda f: np.savez(f, **shared))
+    energy = sim._energy_state()
+    if energy is not None and comm.rank == 0:   # the same on every rank but the work
+        _write_atomic(os.path.join(folder, "energy.npz"),
+                      lambda f: np.savez(f, **{k: v for k, v in energy.items() if k != "work"}))
     if comm.size > 1:
         comm.barrier()                         # every rank file is complete
     if comm.rank == 0:
@@ -200,6 +208,11 @@ def read(sim, path):
     if hasattr(sim.integrator, "restore_state") and os.path.isfile(shared):
         with np.load(shared) as f:
             sim.integrator.restore_state({k: f[k] for k in f.files})
+    energy = os.path.join(folder, "energy.npz")
+    if os.path.isfile(energy):                  # the monitor's work, E_0 and history
+        work = sum((f["energy.work"] for f in files if "energy.work" in f.files), np.zeros(2))
+        with np.load(energy) as f:
+            sim._restore_energy({k: f[k] for k in f.files}, work)
     sim._n_alloc = -1                          # per-particle work arrays are re-sized
     return sim
 

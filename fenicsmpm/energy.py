@@ -7,6 +7,8 @@ import numpy as np
 
 from .io import ProbeWriter
 
+ENERGY_COLUMNS = ("t", "kinetic", "strain", "external_work", "boundary_work", "balance_error")
+
 
 class EnergyMixin:
     """Energy methods of fenicsmpm.Simulation."""
@@ -68,9 +70,9 @@ class EnergyMixin:
         self.energy_history = []
         writer = None
         if path is not None:
-            writer = ProbeWriter(path, ["t", "kinetic", "strain", "external_work",
-                                        "boundary_work", "balance_error"], self.comm)
-        state = dict(e0=None, scale=0.0, warned=False, armed_at=self.step_count + warmup)
+            writer = ProbeWriter(path, ENERGY_COLUMNS, self.comm)
+        state = self._energy_monitor = dict(e0=None, scale=0.0, warned=False,
+                                            armed_at=self.step_count + warmup, writer=writer)
 
         def check(sim):
             e = sim.energy()
@@ -82,8 +84,8 @@ class EnergyMixin:
             err = (total - e["external_work"] - e["boundary_work"] - state["e0"]) / state["scale"]
             e.update(t=sim.t, balance_error=err)
             sim.energy_history.append(e)
-            if writer is not None and sim.comm.rank == 0:
-                writer.write_row(e)
+            if state["writer"] is not None and sim.comm.rank == 0:
+                state["writer"].write_row(e)
             if abs(err) > tolerance and not state["warned"] and sim.step_count >= state["armed_at"]:
                 state["warned"] = True
                 if sim.comm.rank == 0:
@@ -94,3 +96,36 @@ class EnergyMixin:
         check(self)
         self.observe(check, every)
         return self.energy_history
+
+    def _energy_state(self):
+        """The energy monitor's state for a checkpoint (None without `monitor_energy`): this
+        rank's share of the work so far, and the balance's E_0, scale, warning state and
+        history rows (columns ENERGY_COLUMNS), the same on every rank."""
+        if self._work is None:
+            return None
+        st = self._energy_monitor
+        rows = np.array([[e[c] for c in ENERGY_COLUMNS] for e in self.energy_history],
+                        dtype=np.float64).reshape(-1, len(ENERGY_COLUMNS))
+        return dict(work=self._work.copy(), history=rows,
+                    e0=np.nan if st["e0"] is None else st["e0"], scale=st["scale"],
+                    warned=st["warned"], armed_at=st["armed_at"])
+
+    def _restore_energy(self, saved, work):
+        """Restore what _energy_state saved into a simulation that monitors its energy, with
+        `work` this rank's share (the sum of the rank files it reads), so the balance goes on
+        as in the continuous run; the history (and its CSV) is the saved one."""
+        if self._work is None:
+            return
+        st = self._energy_monitor
+        self._work = np.asarray(work, dtype=np.float64).copy()
+        e0 = float(saved["e0"])
+        st.update(e0=None if np.isnan(e0) else e0, scale=float(saved["scale"]),
+                  warned=bool(saved["warned"]), armed_at=int(saved["armed_at"]))
+        rows = np.asarray(saved["history"], dtype=np.float64).reshape(-1, len(ENERGY_COLUMNS))
+        self.energy_history[:] = [dict(zip(ENERGY_COLUMNS, map(float, r))) for r in rows]
+        if st["writer"] is not None and self.comm.rank == 0:
+            st["writer"].close()
+            st["writer"] = ProbeWriter(st["writer"].path, ENERGY_COLUMNS, self.comm)
+            st["writer"]._open()
+            for e in self.energy_history:
+                st["writer"].write_row(e)

@@ -102,6 +102,36 @@ def test_frictional_base_restart_is_bit_for_bit(shared_tmp_path, contact):
     assert WORLD.allreduce(int(np.count_nonzero(status == 1))) >= 4      # sliding nodes
 
 
+def test_energy_monitor_goes_on_after_a_restart(shared_tmp_path):
+    """monitor_energy's work of the loads, its E_0 and its history are part of the
+    checkpoint: after a restart the balance goes on as in the continuous run (before, the
+    work restarted from 0 and a sliding block's balance read 125 % and warned), and its CSV
+    holds the continuous run's rows."""
+    import warnings
+    paths = {k: os.path.join(shared_tmp_path, f"energy_{k}.csv") for k in ("ref", "restart")}
+
+    def build(key):
+        sim = _block_on_incline(False)
+        sim.monitor_energy(every=5, path=paths[key])
+        return sim
+    ref = build("ref")
+    ref.run(steps=60)
+    first = build("restart")
+    first.run(steps=30, checkpoint=os.path.join(shared_tmp_path, "ck_energy"), checkpoint_every=30)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)       # no false balance warning
+        again = fm.Simulation.restart(os.path.join(shared_tmp_path, "ck_energy"),
+                                      lambda: build("restart"))
+        again.run(steps=30)
+    assert again.energy() == ref.energy()
+    assert ref.energy()["external_work"] > 0.0
+    assert again.energy_history == ref.energy_history
+    assert abs(ref.energy_history[-1]["balance_error"]) < 0.02
+    if WORLD.rank == 0:
+        with open(paths["ref"]) as a, open(paths["restart"]) as b:
+            assert a.read() == b.read()
+
+
 def test_newmark_restart_to_solver_tolerance(shared_tmp_path):
     build = lambda: vibrating_bar(fm.Newmark(), n_cells=10, partitioner=strips(12, 1))[0]
     _restart_matches(build, 6, 6, os.path.join(shared_tmp_path, "ck"), exact=False, rtol=1e-10)
