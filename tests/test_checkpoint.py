@@ -132,6 +132,40 @@ def test_energy_monitor_goes_on_after_a_restart(shared_tmp_path):
             assert a.read() == b.read()
 
 
+def test_output_goes_on_after_a_restart(shared_tmp_path):
+    """A run restored from a checkpoint with a fresh fm.Output on the same directory continues
+    its files: the PVD and the grid XDMF hold every frame of the continuous run once, the
+    frames written after the checkpoint by the run that went on past it are replaced (before,
+    the particle files were numbered from 0 again, overwriting the first frames, and the
+    XDMF lost them)."""
+    import re
+    from dolfinx import io as dio
+    out = os.path.join(shared_tmp_path, "out_restart")
+    ref_out = os.path.join(shared_tmp_path, "out_ref")
+    ck = os.path.join(shared_tmp_path, "ck_out")
+    build = lambda: vibrating_bar(fm.Explicit("MUSL"), n_cells=8, partitioner=strips(10, 1))[0]
+    ref = build()
+    ref.run(steps=60, output=fm.Output(ref_out, every=10))
+    first = build()
+    o = fm.Output(out, every=10)
+    first.run(steps=30, checkpoint=ck, checkpoint_every=30, output=o)
+    first.run(steps=20, output=o)                 # went on past the checkpoint, then stopped
+    again = fm.Simulation.restart(ck, build)
+    again.run(steps=30, output=fm.Output(out, every=10))
+
+    def frames(d):
+        pvd = open(os.path.join(d, "particles.pvd")).read()
+        xdmf = open(os.path.join(d, "grid.xdmf")).read()
+        return (re.findall(r'timestep="([^"]+)"[^>]*file="([^"]+)"', pvd),
+                re.findall(r'Time Value="([^"]+)"', xdmf))
+    if WORLD.rank == 0:
+        assert frames(out) == frames(ref_out)
+        assert len(frames(out)[0]) == 7 and len(frames(out)[1]) == 2 * 6     # velocity, mass
+    with dio.XDMFFile(WORLD, os.path.join(out, "grid.xdmf"), "r") as f:
+        msh = f.read_mesh(name="mesh")                                   # still readable
+    assert msh.topology.index_map(msh.topology.dim).size_global == 10
+
+
 def test_newmark_restart_to_solver_tolerance(shared_tmp_path):
     build = lambda: vibrating_bar(fm.Newmark(), n_cells=10, partitioner=strips(12, 1))[0]
     _restart_matches(build, 6, 6, os.path.join(shared_tmp_path, "ck"), exact=False, rtol=1e-10)

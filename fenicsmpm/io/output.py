@@ -49,6 +49,16 @@ class Output:
             raise ValueError(f"Output: 'path' {self.path!r} cannot be written ({err})")
         if self._pw is None:
             self._pw = ParticleWriter(os.path.join(self.path, "particles"), sim.comm)
+            if sim.step_count > 0 and self._exists(sim, self.pvd):
+                # a run restored from a checkpoint (or a later stage) with a fresh Output:
+                # continue the files there, dropping what was written after this time
+                self._pw.resume(sim.t)
+                if self.grid_fields and self._exists(sim, self.xdmf):
+                    if sim.comm.rank == 0:
+                        _trim_xdmf(self.xdmf, sim.t)
+                    if sim.comm.size > 1:
+                        sim.comm.barrier()
+                    self._mode = "a"
         if self.grid_fields and self._xdmf is None:
             from dolfinx import fem, io
             self._xdmf = io.XDMFFile(sim.comm, os.path.join(self.path, "grid.xdmf"), self._mode)
@@ -80,3 +90,40 @@ class Output:
     def pvd(self):
         """The path of the particles' ParaView collection (particles.pvd)."""
         return os.path.join(self.path, "particles.pvd")
+
+    @property
+    def xdmf(self):
+        """The path of the grid fields' XDMF file (grid.xdmf)."""
+        return os.path.join(self.path, "grid.xdmf")
+
+    @staticmethod
+    def _exists(sim, path):
+        there = os.path.isfile(path) if sim.comm.rank == 0 else None
+        return sim.comm.bcast(there, root=0) if sim.comm.size > 1 else there
+
+
+def _trim_xdmf(path, t_max):
+    """Drop the time steps after t_max from the temporal collections of an XDMF file written
+    by dolfinx, and their HDF5 data sets (dolfinx cannot write a data set that exists, and
+    the redone run writes the same times again)."""
+    import xml.etree.ElementTree as ET
+    import h5py
+    ET.register_namespace("xi", "http://www.w3.org/2001/XInclude")
+    tree = ET.parse(path)
+    dropped = []
+    for coll in tree.getroot().iter("Grid"):
+        if coll.get("CollectionType") != "Temporal":
+            continue
+        for g in list(coll.findall("Grid")):
+            tm = g.find("Time")
+            if tm is not None and float(tm.get("Value")) > t_max + 1e-12 * max(abs(t_max), 1.0):
+                dropped += [d.text.strip() for d in g.iter("DataItem") if d.get("Format") == "HDF"]
+                coll.remove(g)
+    for ref in dropped:                         # "grid.h5:/Function/velocity/0_42"
+        fname, _, name = ref.partition(":")
+        with h5py.File(os.path.join(os.path.dirname(path), fname), "a") as h5:
+            if name in h5:
+                del h5[name]
+    tmp = path + ".tmp"
+    tree.write(tmp, xml_declaration=True, encoding="utf-8")
+    os.replace(tmp, path)

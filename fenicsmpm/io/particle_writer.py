@@ -305,6 +305,29 @@ class ParticleWriter:
             ET.SubElement(coll, "DataSet", timestep=repr(t), group="", part="0", file=f)
         _write_xml(self.pvd_path, root)
 
+    def resume(self, t_max):
+        """Continue the collection already in `pvd_path` (collective): keep its data sets up to
+        time t_max (those after it belong to a run that went on past a checkpoint and is being
+        redone) and number the next step after the last kept one. Returns how many were kept."""
+        kept = None
+        if self.rank == 0:
+            kept = ([], [], 0)
+            try:
+                coll = ET.parse(self.pvd_path).getroot().find("Collection")
+            except (OSError, ET.ParseError):
+                coll = None
+            for ds in ([] if coll is None else coll.findall("DataSet")):
+                t, f = float(ds.get("timestep")), ds.get("file")
+                if t <= t_max + 1e-12 * max(abs(t_max), 1.0):
+                    digits = f.rsplit(".", 1)[0].split("_")[-1]
+                    kept[0].append(t)
+                    kept[1].append(f)
+                    kept = (kept[0], kept[1], max(kept[2], int(digits) + 1 if digits.isdigit() else 0))
+        if self.size > 1:
+            kept = self.comm.bcast(kept, root=0)
+        self.times, self.files, self.step = list(kept[0]), list(kept[1]), int(kept[2])
+        return len(self.times)
+
     def close(self):
         """Finish output (the PVD is already complete after every write)."""
         self.closed = True
