@@ -3,7 +3,7 @@ SHELL := /bin/bash
 SYS_PYTHON := /usr/bin/python3
 VENV := .venv
 PY := $(VENV)/bin/python
-DEBS := python3-dolfinx python3-petsc4py python3-mpi4py python3-meshio python3-numba \
+DEBS := python3-dolfinx python3-petsc4py python3-mpi4py python3-meshio python3-h5py python3-numba \
         python3-scipy python3-matplotlib python3-pytest python3-setuptools python3-wheel python3-venv \
         mpi-default-bin python3-sphinx python3-myst-parser python3-sphinx-rtd-theme python3-gmsh \
         libopenblas0-serial
