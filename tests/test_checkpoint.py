@@ -102,6 +102,28 @@ def test_frictional_base_restart_is_bit_for_bit(shared_tmp_path, contact):
     assert WORLD.allreduce(int(np.count_nonzero(status == 1))) >= 4      # sliding nodes
 
 
+def test_force_driven_rigid_body_restart_is_bit_for_bit(shared_tmp_path):
+    """The velocity of a force-driven rigid body (fm.RigidLoad) is part of the checkpoint
+    (before, a restart set it back to zero: the block pushed by 160 N stopped dead)."""
+    from dolfinx import mesh as dmesh
+
+    def build():
+        msh = dmesh.create_rectangle(WORLD, [[0.0, 0.0], [2.4, 0.6]], [24, 6],
+                                     dmesh.CellType.quadrilateral, partitioner=strips(24, 6))
+        grid = fm.Grid(msh)
+        box = lambda a, b: (lambda x: (x[:, 0] > a) & (x[:, 0] < b) & (x[:, 1] > 0.1)  # noqa: E731
+                            & (x[:, 1] < 0.5))
+        mat = lambda: fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)       # noqa: E731
+        p = fm.Particles.fill(grid, mat(), region=box(0.8, 1.2)) + \
+            fm.Particles.fill(grid, mat(), region=box(0.2, 0.6))      # body 1: the rigid one
+        law = fm.RigidLoad((160.0, 0.0))
+        return fm.Simulation(grid, p, fm.ExplicitContact("MUSL", mu=0.0, rigid={1: law}),
+                             dt="auto")
+    ref, again = _restart_matches(build, 40, 40, os.path.join(shared_tmp_path, "ck_rigid"))
+    v_ref, v_again = ref.integrator.rigid[1].v, again.integrator.rigid[1].v
+    assert v_ref[0] > 0.0 and np.array_equal(v_ref, v_again)
+
+
 def test_energy_monitor_goes_on_after_a_restart(shared_tmp_path):
     """monitor_energy's work of the loads, its E_0 and its history are part of the
     checkpoint: after a restart the balance goes on as in the continuous run (before, the

@@ -606,17 +606,29 @@ class ExplicitContact:
         self._penalty = None
 
     def checkpoint_state(self):
-        """Replicated arrays a checkpoint keeps (fenicsmpm.checkpoint): the penalty polylines'
-        vertex positions, last displacements and tangential forces; {} otherwise."""
+        """Replicated arrays a checkpoint keeps (fenicsmpm.checkpoint): the velocity of every
+        force-driven rigid body (fm.RigidLoad, `rigid_v<body>`) and the penalty polylines'
+        vertex positions, last displacements and tangential forces; {} without either."""
+        out = {f"rigid_v{b}": np.asarray(law.v, dtype=np.float64)
+               for b, law in self.rigid.items() if isinstance(law, RigidLoad) and law.v is not None}
         pc = self._penalty
-        if pc is None:
-            return {}
-        return dict(penalty_x=pc.x, penalty_du=pc.du, penalty_ft=pc.ft,
-                    penalty_preloaded=np.array([pc._preloaded]))
+        if pc is not None:
+            out.update(penalty_x=pc.x, penalty_du=pc.du, penalty_ft=pc.ft,
+                       penalty_preloaded=np.array([pc._preloaded]))
+        return out
 
     def restore_state(self, state):
-        """Take back checkpoint_state (now, or when the polylines are next built)."""
-        self._restored = dict(state)
+        """Take back checkpoint_state: the rigid bodies' velocities now, the penalty state now
+        or when the polylines are next built."""
+        state = dict(state)
+        for key in [k for k in state if k.startswith("rigid_v")]:
+            law = self.rigid.get(int(key[len("rigid_v"):]))
+            if not isinstance(law, RigidLoad):
+                raise ValueError(f"restore: the checkpoint has a force-driven rigid body "
+                                 f"{key[len('rigid_v'):]} that this integrator does not "
+                                 f"(rigid={{body: fm.RigidLoad(...)}})")
+            law.v = np.array(state.pop(key), dtype=np.float64)
+        self._restored = state
         if self._penalty is not None:
             self._apply_restored(self._penalty)
 
