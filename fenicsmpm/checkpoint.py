@@ -208,6 +208,9 @@ def read(sim, path):
     if hasattr(sim.integrator, "restore_state") and os.path.isfile(shared):
         with np.load(shared) as f:
             sim.integrator.restore_state({k: f[k] for k in f.files})
+    for bc in sim.boundaries:                  # time-dependent boundary data (CompliantBase)
+        if hasattr(bc, "on_restore"):
+            bc.on_restore(sim)
     energy = os.path.join(folder, "energy.npz")
     if os.path.isfile(energy):                  # the monitor's work, E_0 and history
         work = sum((f["energy.work"] for f in files if "energy.work" in f.files), np.zeros(2))

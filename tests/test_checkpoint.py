@@ -124,6 +124,17 @@ def test_force_driven_rigid_body_restart_is_bit_for_bit(shared_tmp_path):
     assert v_ref[0] > 0.0 and np.array_equal(v_ref, v_again)
 
 
+def test_compliant_base_restart_is_bit_for_bit(shared_tmp_path):
+    """A compliant base's incident velocity v_in(t) is set for the restored time (before, the
+    first step after a restart used the set-up's v_in(0): particle velocities 4e-4 of their
+    largest off after 200 more steps of the site-response column)."""
+    from fenicsmpm.problems import soil_column as sr
+    ny = int(round(sr.H / 0.5))
+    build = lambda: sr.soil_column(fm.Explicit(), h=0.5, base="compliant", t_end=3.0,  # noqa: E731
+                                   partitioner=strips(1, ny, axis=1))[0]
+    _restart_matches(build, 200, 100, os.path.join(shared_tmp_path, "ck_compliant"))
+
+
 def test_energy_monitor_goes_on_after_a_restart(shared_tmp_path):
     """monitor_energy's work of the loads, its E_0 and its history are part of the
     checkpoint: after a restart the balance goes on as in the continuous run (before, the

@@ -187,6 +187,10 @@ class CompliantBase(Viscous):
         self._update = update
         return self
 
+    def on_restore(self, sim):
+        """Set v_in for the restored time (the observer set it for the set-up's t = 0)."""
+        self._update(sim)
+
     def _law(self, u, v, n):
         if self._vin is None:
             raise RuntimeError("CompliantBase: use compliant_base(sim, ...) or .attach(sim)")
