@@ -83,7 +83,8 @@ def write(sim, path, keep=1):
                 n_nodes=grid.V.dofmap.index_map.size_global,
                 materials=[type(m).__name__ for m in p.materials],
                 optional=list(p.optional), n_probes=len(sim.probes),
-                split_count=0 if sim.splitting is None else sim.splitting.count)
+                split_count=0 if sim.splitting is None else sim.splitting.count,
+                removed_mass=sim.removed_mass, removed_count=sim.removed_count)
     shared = getattr(sim.integrator, "checkpoint_state", lambda: {})()
     if shared and comm.rank == 0:               # replicated on every rank: written once
         _write_atomic(os.path.join(folder, "integrator.npz"), lambda f: np.savez(f, **shared))
@@ -198,6 +199,8 @@ def read(sim, path):
     sim.t, sim.step_count, sim.dt = meta["t"], meta["step_count"], meta["dt"]
     sim.stage_start, sim.initial_stress = meta["stage_start"], meta["initial_stress"]
     sim.gravity = np.asarray(meta["gravity"], dtype=np.float64)
+    sim.removed_mass = meta.get("removed_mass", 0.0)     # on_leave="remove" (global sums)
+    sim.removed_count = meta.get("removed_count", 0)
     if sim.splitting is not None:
         sim.splitting.sync_ids(sim)
         sim.splitting.count = meta.get("split_count", 0)

@@ -135,6 +135,27 @@ def test_compliant_base_restart_is_bit_for_bit(shared_tmp_path):
     _restart_matches(build, 200, 100, os.path.join(shared_tmp_path, "ck_compliant"))
 
 
+def test_removed_mass_survives_a_restart(shared_tmp_path):
+    """With on_leave="remove" the mass and count of the particles removed so far are part of
+    the checkpoint (before, a restart counted from 0 again)."""
+    from dolfinx import mesh as dmesh
+
+    def build():
+        msh = dmesh.create_rectangle(WORLD, [[0.0, 0.0], [2.0, 0.5]], [16, 4],
+                                     dmesh.CellType.quadrilateral, partitioner=strips(16, 4))
+        grid = fm.Grid(msh)
+        p = fm.Particles.fill(grid, fm.LinearElastic(E=1e5, nu=0.3, density=1000.0),
+                              region=lambda x: x[:, 0] > 1.5, velocity=(5.0, 0.0))
+        return fm.Simulation(grid, p, fm.Explicit(), dt=2e-3, gravity=(0.0, 0.0),
+                             on_leave="remove")
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)
+        ref, again = _restart_matches(build, 40, 40, os.path.join(shared_tmp_path, "ck_removed"))
+    assert ref.removed_count > 0 and again.removed_count == ref.removed_count
+    assert again.removed_mass == ref.removed_mass
+
+
 def test_energy_monitor_goes_on_after_a_restart(shared_tmp_path):
     """monitor_energy's work of the loads, its E_0 and its history are part of the
     checkpoint: after a restart the balance goes on as in the continuous run (before, the
