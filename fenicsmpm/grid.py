@@ -65,7 +65,7 @@ class Grid:
         nv = self.V.dofmap.dof_layout.num_dofs
         self.cell_nodes = np.ascontiguousarray(
             self.V.dofmap.list.array.reshape(-1, nv)[: self.n_cells], dtype=np.int32)
-        self.node_x = np.ascontiguousarray(self.V.tabulate_dof_coordinates()[:, : self.gdim])
+        self.node_x = self._node_coordinates()
         self._affine_data()
         self.h = self._min_cell_size()
         self._structured = self._detect_structured()
@@ -237,6 +237,21 @@ class Grid:
         """Global number of True entries in a mask over owned entities."""
         n = int(np.count_nonzero(mask_owned))
         return self.comm.allreduce(n) if self.comm.size > 1 else n
+
+    def _node_coordinates(self):
+        """(n_nodes, gdim) node coordinates: on a P1 geometry the mesh's own coordinates,
+        copied through the cells' dofmaps, so the same bits on every partition
+        (tabulate_dof_coordinates evaluates the coordinate element at the reference vertices,
+        whose round-off depends on the cell a node is reached from: the particle positions of
+        Particles.fill then differed in their last bits between rank counts); otherwise
+        tabulate_dof_coordinates."""
+        msh, nv = self.mesh, self.V.dofmap.dof_layout.num_dofs
+        gdofs = msh.geometry.dofmap.array
+        if len(gdofs) != len(self.V.dofmap.list.array):          # a higher-order geometry
+            return np.ascontiguousarray(self.V.tabulate_dof_coordinates()[:, : self.gdim])
+        x = np.empty((self.n_nodes, self.gdim))
+        x[self.V.dofmap.list.array] = msh.geometry.x[gdofs, : self.gdim]
+        return x
 
     def accumulate(self, *arrays):
         """Sum nodal contributions across ranks (reverse scatter with add, then forward).

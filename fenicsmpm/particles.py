@@ -42,6 +42,33 @@ def _reference_points(cell_type, n):
     return verts.mean(axis=1), np.full(len(verts), (0.5 if d == 2 else 1.0 / 6.0) / n ** d)
 
 
+def _simplex_points(grid, nc, ref, n):
+    """Positions (nc len(ref), gdim) of the reference points `ref` (sub-simplex centroids of
+    simplex_subdivision(d, n)) in the first nc cells, and |det J| per point, computed from
+    the cells' vertices sorted by their coordinates: the same bits on every partition.
+    (dolfinx orders a simplex's vertices by their global index, which depends on the
+    partition; x = X_0 + J xi then differed in its last bits between runs on different rank
+    counts, and a `region` bound through a centroid kept different particles.) x is the
+    barycentric sum sum_k lambda_k X_k in that order, lambda_k = m_k / (n (d + 1)), m_k integers."""
+    d = ref.shape[1]
+    den = n * (d + 1)
+    m = np.rint(ref * den).astype(np.int64)
+    m = np.column_stack([den - m.sum(axis=1), m])                # (npts, d + 1), actual order
+    if not np.allclose(m[:, 1:] / den, ref, rtol=0.0, atol=1e-13):
+        raise AssertionError("Particles.fill: reference points are not sub-simplex centroids")
+    X = grid.node_x[grid.cell_nodes[:nc]][:, :, :d]                   # (nc, d + 1, d)
+    order = np.lexsort(tuple(X[:, :, a] for a in reversed(range(d))), axis=-1)
+    Xs = np.take_along_axis(X, order[:, :, None], axis=1)
+    lam = m.T[order] / den                                            # (nc, d + 1, npts)
+    x = lam[:, 0, :, None] * Xs[:, 0, None, :]
+    for k in range(1, d + 1):
+        x = x + lam[:, k, :, None] * Xs[:, k, None, :]
+    det = np.abs(np.linalg.det(Xs[:, 1:] - Xs[:, :1])) if nc else np.zeros(0)
+    out = np.zeros((nc * len(ref), grid.gdim))
+    out[:, :d] = x.reshape(-1, d)
+    return out, np.repeat(det, len(ref))
+
+
 def simplex_subdivision(d, n):
     """The n^d sub-simplices of equal measure that tile the reference triangle (d = 2) or
     tetrahedron (d = 3), as their reference vertices (n^d, d + 1, d). Particles.fill puts one
@@ -144,9 +171,13 @@ class Particles:
         nc = grid.n_owned_cells
         cells = np.repeat(np.arange(nc, dtype=np.int32), len(ref))
         xi = np.ascontiguousarray(np.tile(ref, (nc, 1)))
-        x = np.empty((len(cells), grid.gdim))
-        detJ = np.empty(len(cells))
-        ks.reference_points_to_physical(grid.kind, cells, xi, grid.cell_nodes, grid.node_x, x, detJ)
+        if grid.kind == ks.SIMPLEX:
+            x, detJ = _simplex_points(grid, nc, ref, int(per_cell))
+        else:
+            x = np.empty((len(cells), grid.gdim))
+            detJ = np.empty(len(cells))
+            ks.reference_points_to_physical(grid.kind, cells, xi, grid.cell_nodes, grid.node_x,
+                                            x, detJ)
         vol = detJ * np.tile(w, nc)
         if region is not None:
             if not callable(region):
