@@ -69,6 +69,7 @@ class Grid:
         self._affine_data()
         self.h = self._min_cell_size()
         self._structured = self._detect_structured()
+        self._global_lattice()
         self.structured = self._structured is not None
         self._tree = None
         self._exchange = {}
@@ -158,6 +159,25 @@ class Grid:
         table[flat[order], rank_in_box] = order.astype(np.int32)
         return dict(origin=lo, spacing=spacing, nbox=nbox, table=table)
 
+    def _global_lattice(self):
+        """The structured lattice's global lower corner and spacing (`origin_global`,
+        `spacing_global`: the minima over ranks) and the global index of this rank's first box
+        (`first`), for locate: with its own corner and spacing each rank computed its own
+        (x - origin) / spacing, and a point on a grid line between two ranks could fall in the
+        ghost box on both (penalty polylines along a rank boundary were then located by
+        neither, and the contact lost). Collective."""
+        s = self._structured
+        mine = (np.concatenate([s["origin"], s["spacing"]]) if s is not None
+                else np.full(2 * self.gdim, np.inf))
+        g = np.array(mine, dtype=np.float64)
+        if self.comm.size > 1:                  # the spacing too: each rank measured its own
+            from mpi4py import MPI
+            self.comm.Allreduce(np.ascontiguousarray(mine, dtype=np.float64), g, op=MPI.MIN)
+        if s is not None:
+            s["origin_global"], s["spacing_global"] = g[: self.gdim], g[self.gdim:]
+            s["first"] = np.rint((s["origin"] - s["origin_global"])
+                                 / s["spacing_global"]).astype(np.int64)
+
     # ------------------------------------------------------------------ location
     def locate(self, x, cells=None):
         """Cell and reference coordinates of points x (n, gdim).
@@ -175,7 +195,8 @@ class Grid:
             return out, xi
         s = self._structured
         if s is not None and (cells is None or self.kind != ks.SIMPLEX):
-            ks.locate_structured(self.D, self.kind, x, s["origin"], s["spacing"], s["nbox"], s["table"],
+            ks.locate_structured(self.D, self.kind, x, s["origin_global"], s["first"],
+                                 s["spacing_global"], s["nbox"], s["table"],
                                  self.cell_nodes, self.node_x, self.affine_Jinv, out, xi)
             return out, xi
         inside = np.zeros(n, dtype=np.bool_)

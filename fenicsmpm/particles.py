@@ -247,7 +247,10 @@ class Particles:
         nc = grid.n_cells
         c2e = topo.connectivity(2, 1).array.reshape(-1, 3)[:nc]
         X = grid.node_x[grid.cell_nodes][:, :, :2]                 # (nc, 3, 2)
-        cen = X.mean(axis=1)
+        # every sum below in an order fixed by the coordinates (not by the partition's vertex
+        # numbering), so the particles are the same bits on any number of ranks (_simplex_points)
+        Xs = np.take_along_axis(X, np.lexsort((X[:, :, 1], X[:, :, 0]), axis=-1)[:, :, None], 1)
+        cen = (Xs[:, 0] + Xs[:, 1] + Xs[:, 2]) / 3.0
         mat_cell = np.ones(nc, dtype=bool)
         if region is not None:
             if not callable(region):
@@ -264,10 +267,12 @@ class Particles:
         c_idx, i_idx, edge = c_idx[keep], i_idx[keep], edge[keep]
         a = X[c_idx, (i_idx + 1) % 3]
         b = X[c_idx, (i_idx + 2) % 3]
+        swap = (a[:, 0] > b[:, 0]) | ((a[:, 0] == b[:, 0]) & (a[:, 1] > b[:, 1]))
+        a, b = np.where(swap[:, None], b, a), np.where(swap[:, None], a, b)
         c = cen[c_idx]
         area = 0.5 * np.abs((b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1])
                             - (c[:, 0] - a[:, 0]) * (b[:, 1] - a[:, 1]))
-        order = np.argsort(edge, kind="stable")
+        order = np.lexsort((c[:, 1], c[:, 0], edge))             # by edge, its pieces by c
         edge, a, b, c, area = edge[order], a[order], b[order], c[order], area[order]
         first = np.flatnonzero(np.diff(edge, prepend=-1) != 0)       # an edge's first piece
         two = np.diff(np.append(first, len(edge))) == 2

@@ -152,8 +152,15 @@ def test_node_and_particle_coordinates_are_the_same_bits_on_any_partition(cell):
             msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [3.0, 1.7]], [30, 17],
                                          getattr(dmesh.CellType, cell))
         grid = fm.Grid(msh)
-        p = fm.Particles.fill(grid, fm.LinearElastic(E=1e6, nu=0.3, density=1000.0), per_cell=2)
-        return grid.node_x[: grid.n_owned_nodes], np.column_stack([p.x, p.V])
+        mat = fm.LinearElastic(E=1e6, nu=0.3, density=1000.0)
+        p = fm.Particles.fill(grid, mat, per_cell=2)
+        rows = [np.column_stack([p.x, p.V, np.zeros(len(p.x))])]
+        if cell == "triangle":                          # and the edge layout with its corners
+            q = fm.Particles.fill_edges(grid, mat)
+            rows.append(np.column_stack([q.x, q.V, np.ones(len(q.x)),
+                                         q.cpdi_corners.reshape(len(q.x), -1)]))
+            rows[0] = np.column_stack([rows[0], np.zeros((len(p.x), 8))])
+        return grid.node_x[: grid.n_owned_nodes], np.concatenate(rows)
 
     def rows(a):
         return set(map(tuple, a))
@@ -162,3 +169,24 @@ def test_node_and_particle_coordinates_are_the_same_bits_on_any_partition(cell):
     assert rows(np.concatenate(world.allgather(nodes))) == rows(ref_nodes)
     assert rows(np.concatenate(world.allgather(parts))) == rows(ref_parts)
     assert sum(world.allgather(len(parts))) == len(ref_parts)
+
+
+@pytest.mark.parametrize("cell", ["quadrilateral", "triangle"])
+def test_a_point_on_a_grid_line_is_owned_by_exactly_one_rank(cell):
+    """Structured location counts boxes from the global lattice corner with the global
+    spacing, so a point on a grid line between two ranks lands in the same box on every rank
+    and exactly one rank owns it. With each rank's own corner and spacing, the points of a
+    penalty polyline along y = 0.5 (a rank boundary of the 10 x 20 axisymmetric rod-on-block
+    mesh) were owned by no rank, and the contact was lost (tests/test_penalty_contact.py)."""
+    msh = dmesh.create_rectangle(MPI.COMM_WORLD, [[0.0, 0.0], [0.5, 1.0]], [10, 20],
+                                 getattr(dmesh.CellType, cell))
+    grid = fm.Grid(msh)
+    h = 0.05
+    lines = np.arange(0, 21) * h
+    x = np.array([(0.5 * h + i * h, y) for y in lines for i in range(10)]
+                 + [(xv, 0.5 * h + j * h) for xv in lines[:11] for j in range(20)])
+    cells, _ = grid.locate(x)
+    owned = ((cells >= 0) & (cells < grid.n_owned_cells)).astype(np.int64)
+    total = np.zeros_like(owned)
+    MPI.COMM_WORLD.Allreduce(owned, total, op=MPI.SUM)
+    assert np.all(total == 1), (np.count_nonzero(total == 0), np.count_nonzero(total > 1))

@@ -189,7 +189,7 @@ def pull_back(kind, x, cells, cell_nodes, node_x, affine_Jinv, xi_out, inside_ou
 
 
 @njit(cache=True)
-def _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+def _locate_structured(D, kind, x, origin, first, spacing, nbox, box_cells, cell_nodes, node_x,
                        affine_Jinv, cells_out, xi_out, lo, hi):
     d = len(D)
     nv = cell_nodes.shape[1]
@@ -199,8 +199,9 @@ def _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes,
         stride = 1
         ok = True
         for k in range(d):
-            t = (x[p, k] - origin[k]) / spacing[k]
-            i = int(np.floor(t))
+            tg = (x[p, k] - origin[k]) / spacing[k]      # the same bits on every rank
+            i = int(np.floor(tg)) - first[k]
+            t = tg - first[k]
             if i == nbox[k] and t - nbox[k] < 1e-9:
                 i = nbox[k] - 1  # on the upper face
             if i == -1 and t > -1e-9:
@@ -240,21 +241,25 @@ def _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes,
 
 
 @njit(parallel=PRANGE, cache=True)
-def locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
+def locate_structured(D, kind, x, origin, first, spacing, nbox, box_cells, cell_nodes, node_x,
                       affine_Jinv, cells_out, xi_out):
     """O(1) location on a structured grid of boxes (rectangles or boxes split into cells).
 
     The box index is found by arithmetic, then the (at most 6) cells of that box are tested.
-    Points outside every local box get cell -1. D: tuple of length gdim (compile-time)."""
+    `origin` is the global lattice's lower corner (the same on every rank) and `first` the
+    global index of this rank's first box per axis, so a point on a grid line between ranks
+    gets the same box on every rank and exactly one rank owns it. Points outside every local
+    box get cell -1. D: tuple of length gdim (compile-time)."""
     n = x.shape[0]
     nc = particle_chunks(n)
     if nc == 1:
-        return _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes,
-                                  node_x, affine_Jinv, cells_out, xi_out, np.int64(0), n)
+        return _locate_structured(D, kind, x, origin, first, spacing, nbox, box_cells,
+                                  cell_nodes, node_x, affine_Jinv, cells_out, xi_out,
+                                  np.int64(0), n)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        _locate_structured(D, kind, x, origin, spacing, nbox, box_cells, cell_nodes, node_x,
-                           affine_Jinv, cells_out, xi_out, lo, hi)
+        _locate_structured(D, kind, x, origin, first, spacing, nbox, box_cells, cell_nodes,
+                           node_x, affine_Jinv, cells_out, xi_out, lo, hi)
 
 
 @njit(cache=True, inline="always")
