@@ -89,9 +89,8 @@ def write(sim, path, keep=1):
     if shared and comm.rank == 0:               # replicated on every rank: written once
         _write_atomic(os.path.join(folder, "integrator.npz"), lambda f: np.savez(f, **shared))
     energy = sim._energy_state()
-    if energy is not None and comm.rank == 0:   # the same on every rank but the work
-        _write_atomic(os.path.join(folder, "energy.npz"),
-                      lambda f: np.savez(f, **{k: v for k, v in energy.items() if k != "work"}))
+    if energy is not None and comm.rank == 0:   # the same on every rank
+        _write_atomic(os.path.join(folder, "energy.npz"), lambda f: np.savez(f, **energy))
     if comm.size > 1:
         comm.barrier()                         # every rank file is complete
     if comm.rank == 0:

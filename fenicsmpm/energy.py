@@ -98,15 +98,15 @@ class EnergyMixin:
         return self.energy_history
 
     def _energy_state(self):
-        """The energy monitor's state for a checkpoint (None without `monitor_energy`): this
-        rank's share of the work so far, and the balance's E_0, scale, warning state and
-        history rows (columns ENERGY_COLUMNS), the same on every rank."""
+        """The energy monitor's state for a checkpoint (None without `monitor_energy`): the
+        balance's E_0, scale, warning state and history rows (columns ENERGY_COLUMNS), the
+        same on every rank (each rank's share of the work, `_work`, goes in its rank file)."""
         if self._work is None:
             return None
         st = self._energy_monitor
         rows = np.array([[e[c] for c in ENERGY_COLUMNS] for e in self.energy_history],
                         dtype=np.float64).reshape(-1, len(ENERGY_COLUMNS))
-        return dict(work=self._work.copy(), history=rows,
+        return dict(history=rows,
                     e0=np.nan if st["e0"] is None else st["e0"], scale=st["scale"],
                     warned=st["warned"], armed_at=st["armed_at"])
 
@@ -124,8 +124,4 @@ class EnergyMixin:
         rows = np.asarray(saved["history"], dtype=np.float64).reshape(-1, len(ENERGY_COLUMNS))
         self.energy_history[:] = [dict(zip(ENERGY_COLUMNS, map(float, r))) for r in rows]
         if st["writer"] is not None and self.comm.rank == 0:
-            st["writer"].close()
-            st["writer"] = ProbeWriter(st["writer"].path, ENERGY_COLUMNS, self.comm)
-            st["writer"]._open()
-            for e in self.energy_history:
-                st["writer"].write_row(e)
+            st["writer"].rewrite(self.energy_history)

@@ -266,7 +266,7 @@ class Grid:
         whose round-off depends on the cell a node is reached from: the particle positions of
         Particles.fill then differed in their last bits between rank counts); otherwise
         tabulate_dof_coordinates."""
-        msh, nv = self.mesh, self.V.dofmap.dof_layout.num_dofs
+        msh = self.mesh
         gdofs = msh.geometry.dofmap.array
         if len(gdofs) != len(self.V.dofmap.list.array):          # a higher-order geometry
             return np.ascontiguousarray(self.V.tabulate_dof_coordinates()[:, : self.gdim])

@@ -133,9 +133,7 @@ class Probe:
         comm = self.sim.comm
         if comm.rank == 0:
             w = ProbeWriter(self.path, self.columns, None)
-            w._open()
-            for row in rows:
-                w.write_row(list(row))
+            w.rewrite(list(r) for r in rows)
             w.close()
         if comm.size > 1:
             comm.barrier()

@@ -76,6 +76,16 @@ class ProbeWriter:
         self._file.flush()
         self.rows_written += 1
 
+    def rewrite(self, rows):
+        """Start the file afresh (header, then `rows`, each a sequence or a dict) and keep it
+        open for more rows, e.g. after a restore (this rank only; not collective)."""
+        self.close()
+        append, self.append = self.append, False
+        self._open()
+        self.append = append
+        for row in rows:
+            self.write_row(row)
+
     def close(self):
         """Close the file if this rank opened it (not collective)."""
         if self._file is not None:
