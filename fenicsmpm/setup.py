@@ -8,7 +8,8 @@ import warnings
 
 import numpy as np
 
-from .boundaries import ParticleLayer, Robin, RobinForms, Traction, fixed_dofs
+from .boundaries import (ParticleLayer, PrescribedMotion, Robin, RobinForms, Traction, fixed_dofs,
+                         prescribed_increment)
 from .boundaries.friction import FrictionalBoundary
 from .boundaries.robin import facets_on_boundary
 from .io import Probe
@@ -46,11 +47,38 @@ def _check_ramp(T, owner):
 class SetupMixin:
     """Set-up methods of fenicsmpm.Simulation (see there for the attributes they fill)."""
 
-    def fix(self, where, components=None):
+    def fix(self, where, components=None, displacement=None, velocity=None):
         """Fix the given displacement components (default: all) at nodes where(x) is True.
 
-        A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1])."""
-        self.fixed |= fixed_dofs(self.grid, where, components)
+        A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1]).
+        Prescribed motion instead of holding them (fm.Explicit and fm.QuasiStatic): either
+        displacement=u(t), a function of time giving a number or one value per component
+        (each step moves the dofs by u(t + dt) - u(t)), or velocity=v, a constant or v(t)
+        (each step moves them by v(t + dt/2) dt); e.g. a platen pushed down 5 cm over 1 s:
+        fix(top, [1], displacement=lambda t: -0.05 * t). sim.reaction(where) is the force
+        these dofs exert on the material."""
+        mask = fixed_dofs(self.grid, where, components)
+        if displacement is not None or velocity is not None:
+            comps = list(range(self.gdim)) if components is None else list(np.atleast_1d(components))
+            motion = PrescribedMotion(mask, comps, displacement, velocity)
+            self._check_prescribed(self.integrator, "fix", [motion])
+            self.motions.append(motion)
+        self.fixed |= mask
+
+    @staticmethod
+    def _check_prescribed(integrator, owner, motions):
+        if motions and not getattr(integrator, "supports_prescribed_motion", False):
+            raise NotImplementedError(
+                f"{owner}: prescribed motion (fix(..., displacement=... or velocity=...)) needs "
+                f"fm.Explicit or fm.QuasiStatic; {type(integrator).__name__} holds fixed dofs "
+                f"at rest (release(where) the moving dofs first to change integrator)")
+
+    def prescribed_increment(self, t0, t1, u=None, fixed_only=True):
+        """(n_nodes, gdim) displacement increments of the fixed dofs over [t0, t1] from
+        fix(..., displacement=/velocity=) and the integrator's u(x, t) (boundaries.dirichlet.
+        prescribed_increment); None when no dof moves."""
+        return prescribed_increment(self.grid.node_x, self.fixed, self.motions, t0, t1, u,
+                                    fixed_only)
 
     def reaction(self, where=None):
         """The total force that the fixed dofs at the nodes where(x) (default: all fixed
@@ -150,6 +178,9 @@ class SetupMixin:
         mask = (np.ones((self.grid.n_nodes, self.gdim), dtype=bool) if where is None
                 else fixed_dofs(self.grid, where, components))
         self.fixed &= ~mask
+        for m in self.motions:
+            m.mask &= ~mask
+        self.motions = [m for m in self.motions if m.mask.any()]
 
     def start_stage(self, integrator=None, dt=None, gravity=None, initial_stress=True,
                     reset_displacement=True, gravity_ramp=None):
@@ -176,6 +207,7 @@ class SetupMixin:
             if self.frictions and not getattr(integrator, "supports_friction", False):
                 raise NotImplementedError("start_stage: frictional boundaries need fm.Explicit, "
                                           f"not {type(integrator).__name__}")
+            self._check_prescribed(integrator, "start_stage", self.motions)
             self.integrator = integrator
             if integrator.explicit and self.layers:
                 self._use_standard_shape(LAYER_EXPLICIT)
@@ -351,6 +383,7 @@ class SetupMixin:
         self.comm = g.comm        # the old mesh's communicator dies with the old mesh
         p.cell, p.xi = g.locate(p.x)
         self.fixed = np.zeros((g.n_nodes, d), dtype=bool)
+        self.motions = []
         if g.axisymmetric:
             self.fixed[:, 0] = np.abs(g.node_x[:, 0]) <= 1e-9 * g.h
         self.robin_u = np.zeros((g.n_nodes, d))

@@ -111,6 +111,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.t = 0.0
         self.step_count = 0
         self.fixed = np.zeros((grid.n_nodes, d), dtype=bool)
+        self.motions = []                            # fix(..., displacement=/velocity=)
         if grid.axisymmetric:                        # symmetry axis: u_r = 0 at r = 0
             self.fixed[:, 0] = np.abs(grid.node_x[:, 0]) <= 1e-9 * grid.h
         self.tractions = []

@@ -1,5 +1,5 @@
 """Boundary conditions on the grid: Dirichlet sets, UFL traction forms and Robin laws."""
-from .dirichlet import fixed_dofs
+from .dirichlet import PrescribedMotion, fixed_dofs, prescribed_increment
 from .particle_layer import ParticleLayer
 from .robin import Robin, RobinForms, Viscoelastic, Viscous
 from .traction import Traction, TractionForms

@@ -66,6 +66,7 @@ class Explicit:
     records_work = True
     reports_reaction = True             # sim.nodal["reaction"] after each step
     supports_friction = True
+    supports_prescribed_motion = True
 
     def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None):
         """scheme: one of SCHEMES; transfer: one of TRANSFERS (default "flip"; module
@@ -77,7 +78,8 @@ class Explicit:
         (sim.fix) move with the velocity (u(x, t + dt) - u(x, t)) / dt in the step (x the node
         coordinates) instead of resting; the force the fixed dofs exert on the material,
         R = m (v - v*) / dt with v* the unconstrained velocity, is sim.nodal["reaction"]
-        (summed over ranks), as fm.QuasiStatic(displacement=...) gives it."""
+        (summed over ranks), as fm.QuasiStatic(displacement=...) gives it. To move one
+        boundary only: sim.fix(where, components, displacement=u(t) or velocity=v)."""
         if displacement is not None and not callable(displacement):
             raise TypeError(f"Explicit: 'displacement' must be None or u(x, t), got {displacement!r}")
         self.displacement, self._vp = displacement, None
@@ -134,17 +136,11 @@ class Explicit:
             p.v[:] = v_p
 
     def _prescribed(self, sim, dt):
-        """(u(x, t + dt) - u(x, t)) / dt on the fixed dofs (x the node coordinates), or None
-        without prescribed motion."""
-        if self.displacement is None:
-            return None
-        x = sim.grid.node_x
-        du = (np.asarray(self.displacement(x, sim.t + dt), dtype=float)
-              - np.asarray(self.displacement(x, sim.t), dtype=float))
-        if du.shape != x.shape or not np.all(np.isfinite(du)):
-            raise ValueError(f"Explicit: 'displacement' must return finite values of shape "
-                             f"{x.shape} for the node coordinates, got shape {du.shape}")
-        return np.where(sim.fixed, du / dt, 0.0)
+        """The fixed dofs' velocity this step, (u(t + dt) - u(t)) / dt from
+        sim.prescribed_increment (this integrator's `displacement` and sim.fix(...,
+        displacement=/velocity=)), or None without prescribed motion."""
+        du = sim.prescribed_increment(sim.t, sim.t + dt, self.displacement)
+        return None if du is None else du / dt
 
     def _p2g(self, sim, v, x, with_mass):
         """Nodal mass (with_mass) and momentum of the particle velocities v (= p.v) at

@@ -465,8 +465,11 @@ class QuasiStatic(_Newton):
     displacement: None, or u(x, t) -> (n, gdim) for displacement control: each step moves the
     fixed dofs (sim.fix) by u(x, t + dt) - u(x, t), x the node coordinates, and starts Newton
     from that increment on the free dofs too (so u should be a plausible field there, e.g. 0);
-    the force the fixed dofs exert is sim.nodal["reaction"] after the step. Newton's options
+    the force the fixed dofs exert is sim.nodal["reaction"] after the step. Simpler for one
+    boundary: sim.fix(where, components, displacement=u(t) or velocity=v), which moves only
+    those dofs (SetupMixin.fix). Newton's options
     (rtol, utol, max_iter, line_search="auto", ghost, petsc_options): as Newmark's."""
+    supports_prescribed_motion = True
 
     def __init__(self, load_steps=1, displacement=None, **kw):
         super().__init__(**kw)
@@ -487,11 +490,7 @@ class QuasiStatic(_Newton):
         active = sim.active_mask(m)
         f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale, active=active)
         sim.nodal = dict(mass=m, active=active)
-        du0 = None
-        if self.displacement is not None:
-            x = grid.node_x
-            du0 = (np.asarray(self.displacement(x, sim.t + dt), dtype=float)
-                   - np.asarray(self.displacement(x, sim.t), dtype=float))
+        du0 = sim.prescribed_increment(sim.t, sim.t + dt, self.displacement, fixed_only=False)
         du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt,
                              np.zeros((grid.n_nodes, sim.gdim)), du0=du0)
         zero = np.zeros_like(du)
