@@ -11,6 +11,7 @@ import numpy as np
 from .boundaries import (ParticleLayer, PrescribedMotion, Robin, RobinForms, Traction, fixed_dofs,
                          prescribed_increment)
 from .boundaries.friction import FrictionalBoundary
+from .boundaries.particle_layer import _pull_back_area, pressure_force
 from .boundaries.robin import facets_on_boundary
 from .io import Probe
 from .io.probe import ReactionProbe
@@ -121,6 +122,56 @@ class SetupMixin:
         self.particle_loads.append((field, load))
         return n
 
+    def add_surface_pressure(self, region, normal, pressure, thickness=None):
+        """A pressure (compression positive: a number or a function p(t)) on the material
+        surface carried by the particles selected by region(x) now, whose outward unit normal
+        is now `normal` (a vector): f_i -= sum_p N_ip p(t) a_p n_p, with the current area and
+        normal from Nanson's formula a_p n_p = J F^-T (A_p N_p) and A_p = V_p / thickness now
+        (default thickness: the particle size V_p^(1/d); boundaries.particle_layer). Unlike a
+        facet traction it follows the surface as it moves, stretches and turns: a confining
+        pressure on a sample that bulges, a surcharge on a settling crest. The area vectors
+        are a particle field (they migrate and are checkpointed); with implicit integrators
+        the load is taken at the start of each step (no load stiffness). Returns the global
+        number of loaded particles."""
+        k = len(self.surface_pressures)
+        name = f"add_surface_pressure #{k}"
+        if not callable(region):
+            raise TypeError(f"{name}: 'region' must be a function region(x) -> bool, got "
+                            f"{type(region).__name__}")
+        nrm = np.asarray(normal, dtype=float)
+        if nrm.shape != (self.gdim,) or not np.all(np.isfinite(nrm)) or not np.any(nrm):
+            raise ValueError(f"{name}: 'normal' must be a non-zero vector of length "
+                             f"{self.gdim}, got {normal!r}")
+        if thickness is not None and not (isinstance(thickness, (int, float, np.floating))
+                                          and math.isfinite(thickness) and thickness > 0):
+            raise ValueError(f"{name}: 'thickness' must be a length > 0 or None, got {thickness!r}")
+        value = pressure if callable(pressure) else (lambda t, q=pressure: q)
+        self._pressure_at(value, self.t, name)
+        p = self.particles
+        sel = np.asarray(region(p.x))
+        if sel.shape != (len(p),):
+            raise ValueError(f"{name}: 'region(x)' must return one bool per particle, shape "
+                             f"({len(p)},), got shape {sel.shape}")
+        sel = sel.astype(bool)
+        n = int(np.count_nonzero(sel))
+        n = self.comm.allreduce(n) if self.comm.size > 1 else n
+        if n == 0:
+            raise ValueError(f"{name}: 'region' selects no particle")
+        d = self.gdim
+        t = p.V[sel] ** (1.0 / d) if thickness is None else thickness
+        an0 = p.add_field(f"pressure_an0_{k}", (d,))
+        an0[sel] = _pull_back_area(p.F[sel], (p.V[sel] / t)[:, None] * (nrm / np.linalg.norm(nrm)), d)
+        self.surface_pressures.append((f"pressure_an0_{k}", value, name))
+        return n
+
+    @staticmethod
+    def _pressure_at(value, t, name):
+        q = value(t)
+        if not (isinstance(q, (int, float, np.floating)) and math.isfinite(q)):
+            raise ValueError(f"{name}: 'pressure' must be a finite number or p(t) returning one, "
+                             f"got {q!r} at t = {t:.6g}")
+        return float(q)
+
     def move_particles(self, region, displacement, components=None, penalty=100.0):
         """Prescribe the displacement of the particles selected by region(x) now:
         u_p = displacement(X, t) on `components` (default: all), X their positions now, a
@@ -171,6 +222,12 @@ class SetupMixin:
             if len(sel):
                 vec = np.ascontiguousarray(np.broadcast_to(load.at(t, self.gdim), (len(sel), self.gdim)))
                 kt.p2g_weighted(self.grid.D, self.nodes[sel], self.N[sel], share[sel], vec, out)
+        for field, value, name in self.surface_pressures:
+            an0 = getattr(p, field)
+            loaded = np.flatnonzero(np.any(an0 != 0.0, axis=1))
+            if len(loaded):
+                pressure_force(self.grid.D, loaded, self.nodes, self.N, p.F, an0,
+                               self._pressure_at(value, t, name), out)
 
     def release(self, where=None, components=None):
         """Remove Dirichlet conditions at nodes where(x) (default: everywhere) on the given

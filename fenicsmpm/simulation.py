@@ -118,6 +118,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self._traction_forms = None
         self._warned_traction = False
         self.particle_loads = []
+        self.surface_pressures = []                  # add_surface_pressure
         self.particle_motions = []
         self.frictions = []
         self.splitting = None
@@ -323,7 +324,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
                                       f"acts on grid nodes without material (the material left the "
                                       f"loaded facets); that part of the load is lost",
                                       RuntimeWarning, stacklevel=2)
-        if self.particle_loads:
+        if self.particle_loads or self.surface_pressures:
             fl = np.zeros_like(f)
             self._particle_load_force(t, fl)
             self.grid.accumulate(fl)

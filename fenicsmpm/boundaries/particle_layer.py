@@ -148,3 +148,18 @@ def layer_tangent(D, layer, nodes, N, F, an0, coef, c_v, plan, nodeptr, constrai
                     for c in range(d):
                         block[r, c] = w * ((cn - ct) * n[r] * n[c] + (ct if r == c else 0.0))
                 add_block(data, plan[p, i_, j_], deg, i, nodes[p, j_], d, constrained, block)
+
+
+@njit(cache=True)
+def pressure_force(D, loaded, nodes, N, F, an0, pressure, out):
+    """out_i -= sum_{p in loaded} N_ip pressure a_p n_p, a_p n_p = J F^-T (A_p N_p) (Nanson):
+    a follower pressure on the surface the particles carry (Simulation.add_surface_pressure)."""
+    d = len(D)
+    n = np.empty(d)
+    for q in range(loaded.shape[0]):
+        p = loaded[q]
+        a = _current_area_normal(F[p], an0[p], d, n)
+        for k in range(d):
+            t = -pressure * a * n[k]
+            for b in range(nodes.shape[1]):
+                out[nodes[p, b], k] += N[p, b] * t
