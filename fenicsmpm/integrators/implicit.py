@@ -50,6 +50,13 @@ AUTO_LINE_SEARCH = 6    # line_search="auto": the backtracking depth of the retr
 log = logging.getLogger("fenicsmpm.newton")
 
 
+# appended to a KSP failure in the preconditioner's set-up (a zero pivot of the LU)
+SINGULAR_HINT = ("; the tangent is singular: some dofs are held only by particles that add "
+                 "(almost) no stiffness, typically nodes of a cell the material has just begun "
+                 "to enter; the ghost penalty on such cells, e.g. fm.QuasiStatic(ghost=0.01) or "
+                 "fm.Newmark(ghost=0.01), removes the zero pivots (docs: integrators)")
+
+
 class _NotConverged(RuntimeError):
     """Newton failed on this step (before any particle state changed)."""
 
@@ -303,8 +310,9 @@ class _Newton:
                 try:
                     delta = sys.solve(R)
                 except RuntimeError as err:               # KSP failure: say when and where
+                    hint = (SINGULAR_HINT if "PCSETUP" in str(err) and ghost is None else "")
                     raise RuntimeError(f"step {sim.step_count}, t = {sim.t:.6g}, Newton iteration "
-                                       f"{it}: {err}") from err
+                                       f"{it}: {err}{hint}") from err
                 t4 = time.perf_counter()
                 self.ksp_iterations += sys.iterations
                 T["assembly"] += t3 - t2
