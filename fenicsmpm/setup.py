@@ -95,6 +95,21 @@ class SetupMixin:
         r = R[:own][sel].sum(axis=0)
         return self.comm.allreduce(r) if self.comm.size > 1 else r
 
+    def _select_particles(self, region, name):
+        """(this rank's mask of the particles region(x) selects now, their global count);
+        refuses a region that selects none anywhere (collective)."""
+        p = self.particles
+        sel = np.asarray(region(p.x))
+        if sel.shape != (len(p),):
+            raise ValueError(f"{name}: 'region(x)' must return one bool per particle, shape "
+                             f"({len(p)},), got shape {sel.shape}")
+        sel = sel.astype(bool)
+        n = int(np.count_nonzero(sel))
+        n = self.comm.allreduce(n) if self.comm.size > 1 else n
+        if n == 0:
+            raise ValueError(f"{name}: 'region' selects no particle")
+        return sel, n
+
     def add_particle_load(self, region, value):
         """A force value(t) (a vector; per unit thickness in 2D) shared equally by the particles
         selected by region(x) now, mapped to the grid with their shape functions,
@@ -108,15 +123,7 @@ class SetupMixin:
         load = Traction(lambda x: True, value, name=name)
         load.at(self.t, self.gdim, nonfinite=ValueError)
         p = self.particles
-        sel = np.asarray(region(p.x))
-        if sel.shape != (len(p),):
-            raise ValueError(f"{name}: 'region(x)' must return one bool per particle, shape "
-                             f"({len(p)},), got shape {sel.shape}")
-        sel = sel.astype(bool)
-        n = int(np.count_nonzero(sel))
-        n = self.comm.allreduce(n) if self.comm.size > 1 else n
-        if n == 0:
-            raise ValueError(f"{name}: 'region' selects no particle")
+        sel, n = self._select_particles(region, name)
         field = f"load_share_{len(self.particle_loads)}"
         p.add_field(field)[sel] = 1.0 / n
         self.particle_loads.append((field, load))
@@ -148,15 +155,7 @@ class SetupMixin:
         value = pressure if callable(pressure) else (lambda t, q=pressure: q)
         self._pressure_at(value, self.t, name)
         p = self.particles
-        sel = np.asarray(region(p.x))
-        if sel.shape != (len(p),):
-            raise ValueError(f"{name}: 'region(x)' must return one bool per particle, shape "
-                             f"({len(p)},), got shape {sel.shape}")
-        sel = sel.astype(bool)
-        n = int(np.count_nonzero(sel))
-        n = self.comm.allreduce(n) if self.comm.size > 1 else n
-        if n == 0:
-            raise ValueError(f"{name}: 'region' selects no particle")
+        sel, n = self._select_particles(region, name)
         d = self.gdim
         t = p.V[sel] ** (1.0 / d) if thickness is None else thickness
         an0 = p.add_field(f"pressure_an0_{k}", (d,))
