@@ -49,3 +49,15 @@ def test_readme_example(shared_module_tmp_path, monkeypatch, capsys):
                           os.path.join(shared_module_tmp_path, "results", "example", "particles.pvd"))
     if comm.rank == 0:
         assert "sigma_yy under the load" in capsys.readouterr().out
+
+
+def test_biaxial_test_demo(shared_module_tmp_path):
+    """Seed 004's biaxial test in MPM (--quick: 50 quasi-static steps, 64 particles): the
+    deviatoric stress follows the element test within 1 % at 1 / 2 / 5 / 10 % axial strain
+    (measured +0.30 / +0.06 / +0.11 / +0.25 %, serially and on 2 ranks) and the dense sand
+    ends dilated (ln V / V0 = +0.93 %, element test +0.89 %)."""
+    out = os.path.join(shared_module_tmp_path, "biaxial")
+    m = load_demo("biaxial_test").main(["--quick", "--out", out])
+    assert exist_on_rank0(m["png"], m["json"])
+    assert all(abs(r) < 0.01 for r in m["q_relative_difference"].values()), m
+    assert 0.008 < m["volumetric_strain_end"] < 0.011, m
