@@ -114,3 +114,16 @@ def test_fix_motion_errors_and_release():
     sim.start_stage(fm.Newmark(), dt=0.01, initial_stress=False)
     with pytest.raises(NotImplementedError, match="fix: prescribed motion .* Newmark holds"):
         sim.fix(top, [1], velocity=-0.1)
+
+
+def test_newton_stalled_above_rtol_says_so():
+    """A Newton failure that came within 100 x rtol and stalled there names the residual floor
+    and a larger rtol (the hypoplastic biaxial demo stalled at 1.2e-8 with rtol 1e-8): here the
+    round-off floor of an elastic oedometer (about 6e-14) against rtol = 1e-15, with the
+    round-off stagnation test switched off (utol = 1e-30)."""
+    from scenes import oedometric_block, top
+    sim, _ = oedometric_block(fm.QuasiStatic(rtol=1e-15, utol=1e-30, max_iter=6, line_search=0),
+                              cells=2)
+    sim.fix(top, [1], displacement=lambda t: -1e-3 * t)
+    with pytest.raises(RuntimeError, match="stalled just above rtol = 1e-15: .* rtol=1e-6"):
+        sim.run(steps=1)

@@ -57,6 +57,14 @@ SINGULAR_HINT = ("; the tangent is singular: some dofs are held only by particle
                  "fm.Newmark(ghost=0.01), removes the zero pivots (docs: integrators)")
 
 
+# appended to a Newton failure that came within STALL_FACTOR x rtol and stalled there
+STALL_FACTOR = 100.0
+STALL_HINT = ("; it stalled just above rtol = {rtol:.3g}: the residual has a floor there "
+              "(round-off, or a material whose update sub-steps adaptively, fm.Hypoplastic: "
+              "demos/biaxial_test.py stalled at 1.2e-8); a larger rtol, e.g. rtol=1e-6, ends "
+              "such steps")
+
+
 class _NotConverged(RuntimeError):
     """Newton failed on this step (before any particle state changed)."""
 
@@ -278,9 +286,11 @@ class _Newton:
                     why = (f"in {self.max_iter} iterations" if it == self.max_iter else
                            f"(diverged at iteration {it}: |R| = {rnorm / max(r0, 1e-300):.3g}"
                            f" x its initial value)")
+                    stalled = it == self.max_iter and best[0] < STALL_FACTOR * self.rtol
                     err = _NotConverged(f"step {sim.step_count}, t = {sim.t:.6g}: Newton did not "
                                         f"converge {why} (|R|/|f| = {rnorm / scale:.3e}; closest "
-                                        f"{best[0]:.3e} at iteration {best[1]})")
+                                        f"{best[0]:.3e} at iteration {best[1]})"
+                                        + (STALL_HINT.format(rtol=self.rtol) if stalled else ""))
                     err.iterations = it
                     raise err
                 t2 = time.perf_counter()
