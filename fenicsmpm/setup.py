@@ -52,7 +52,7 @@ class SetupMixin:
         """Fix the given displacement components (default: all) at nodes where(x) is True.
 
         A roller is one component, e.g. fix(lambda x: np.isclose(x[:, 1], 0), [1]).
-        Prescribed motion instead of holding them (fm.Explicit and fm.QuasiStatic): either
+        Prescribed motion instead of holding them (fm.Explicit, fm.QuasiStatic, fm.Newmark): either
         displacement=u(t), a function of time giving a number or one value per component
         (each step moves the dofs by u(t + dt) - u(t)), or velocity=v, a constant or v(t)
         (each step moves them by v(t + dt/2) dt); e.g. a platen pushed down 5 cm over 1 s:
@@ -60,7 +60,8 @@ class SetupMixin:
         these dofs exert on the material."""
         mask = fixed_dofs(self.grid, where, components)
         if displacement is not None or velocity is not None:
-            comps = list(range(self.gdim)) if components is None else list(np.atleast_1d(components))
+            comps = (list(range(self.gdim)) if components is None
+                     else list(np.atleast_1d(components)))
             motion = PrescribedMotion(mask, comps, displacement, velocity)
             self._check_prescribed(self.integrator, "fix", [motion])
             self.motions.append(motion)
@@ -71,8 +72,8 @@ class SetupMixin:
         if motions and not getattr(integrator, "supports_prescribed_motion", False):
             raise NotImplementedError(
                 f"{owner}: prescribed motion (fix(..., displacement=... or velocity=...)) needs "
-                f"fm.Explicit or fm.QuasiStatic; {type(integrator).__name__} holds fixed dofs "
-                f"at rest (release(where) the moving dofs first to change integrator)")
+                f"fm.Explicit, fm.QuasiStatic or fm.Newmark; {type(integrator).__name__} holds "
+                f"fixed dofs at rest (release(where) the moving dofs first to change integrator)")
 
     def prescribed_increment(self, t0, t1, u=None, fixed_only=True):
         """(n_nodes, gdim) displacement increments of the fixed dofs over [t0, t1] from

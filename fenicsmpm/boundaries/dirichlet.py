@@ -59,6 +59,34 @@ class PrescribedMotion:
         return self.value(v, "velocity") * (t1 - t0)
 
 
+    def rates(self, t, dt):
+        """(velocity, acceleration) of the dofs at t, one value per component, by central
+        differences over dt (implicit Newmark's start-of-step kinematics): from u(t) or v(t);
+        a constant velocity has zero acceleration."""
+        if self.displacement is not None:
+            u = [self.value(self.displacement(s), "displacement") for s in (t - dt, t, t + dt)]
+            return (u[2] - u[0]) / (2.0 * dt), (u[2] - 2.0 * u[1] + u[0]) / (dt * dt)
+        if not callable(self.velocity):
+            v = self.value(self.velocity, "velocity")
+            return v, np.zeros_like(v)
+        v = [self.value(self.velocity(s), "velocity") for s in (t - dt, t, t + dt)]
+        return v[1], (v[2] - v[0]) / (2.0 * dt)
+
+
+def prescribed_rates(shape, motions, t, dt):
+    """(moving (n_nodes, gdim) bool, velocity, acceleration) of the dofs moved by `motions`
+    at t (PrescribedMotion.rates; a later motion wins)."""
+    moving = np.zeros(shape, dtype=bool)
+    v, a = np.zeros(shape), np.zeros(shape)
+    for m in motions:
+        vm, am = m.rates(t, dt)
+        for k, c in enumerate(m.components):
+            sel = m.mask[:, c]
+            moving[sel, c] = True
+            v[sel, c], a[sel, c] = vm[k], am[k]
+    return moving, v, a
+
+
 def prescribed_increment(node_x, fixed, motions, t0, t1, u=None, fixed_only=True):
     """(n_nodes, gdim) displacement increments of the fixed dofs over [t0, t1], zero elsewhere:
     the integrator's u(x, t) on every fixed dof where given (u(x, t1) - u(x, t0); with

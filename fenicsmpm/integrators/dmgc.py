@@ -226,3 +226,4 @@ class DoubleMappingQuasiStatic(_DoubleMapping, QuasiStatic):
 
 class DoubleMappingNewmark(_DoubleMapping, Newmark):
     """fm.Newmark with DM-GC (module docstring); same requirements as DoubleMappingQuasiStatic."""
+    supports_prescribed_motion = False  # not checked with the double mapping

@@ -230,6 +230,7 @@ class ImplicitGeneralizedAlpha(Newmark):
     Keyword arguments (rtol, utol, max_iter, flip, petsc_options, prefix) as for Newmark."""
 
     records_work = False            # f_ext here carries alpha_f-weighted start forces
+    supports_prescribed_motion = False  # Newmark's moving dofs not checked with alpha_f, alpha_m
 
     def __init__(self, rho_inf=0.8, **kw):
         prm = implicit_parameters(_radius(rho_inf, "rho_inf", "ImplicitGeneralizedAlpha"))

@@ -41,6 +41,7 @@ import numpy as np
 from ..kernels import axisymmetric as axi
 from ..boundaries import particle_layer as kl
 from ..boundaries import particle_motion as pm
+from ..boundaries.dirichlet import prescribed_rates
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
 from .linear_system import DEFAULT_PREFIX, LinearSystem, OutsidePattern, stencil_rings
@@ -395,6 +396,7 @@ class Newmark(_Newton):
     alpha_m = alpha_f = 0.0
     records_work = True
     iterative_default = True          # default KSP: GMRES + block Jacobi, LU if it fails
+    supports_prescribed_motion = True  # sim.fix(..., displacement=/velocity=): Newmark kinematics
 
     def __init__(self, beta=0.25, gamma=0.5, **kw):
         super().__init__(**kw)
@@ -426,6 +428,14 @@ class Newmark(_Newton):
         a0[active] = ma[active] / m[active, None]
         v0[sim.fixed] = 0.0
         a0[sim.fixed] = 0.0
+        # dofs moved by sim.fix(..., displacement=/velocity=): their prescribed start-of-step
+        # velocity and acceleration, and the step's increment as their predictor
+        moving = None
+        if sim.motions:
+            moving, vp, ap = prescribed_rates(v0.shape, sim.motions, sim.t, dt)
+            moving &= sim.fixed
+            v0[moving], a0[moving] = vp[moving], ap[moving]
+            dup = sim.prescribed_increment(sim.t, sim.t + dt)
         sim.nodal = dict(mass=m, active=active)
         am, af = self.alpha_m, self.alpha_f
         if af:
@@ -441,17 +451,21 @@ class Newmark(_Newton):
             return v0 + dt * ((1 - g) * a0 + g * accel(du))
 
         # predictor: constant acceleration (a^{n+1} = a^n, v^{n+1} = v^n + dt a^n)
+        du0 = dt * v0 + 0.5 * dt * dt * a0
+        if moving is not None:
+            du0[moving] = dup[moving]
         du = self.solve_step(sim, dt, f_ext, wm / (b * dt * dt),
                              lambda du: m[:, None] * (wm * accel(du) + am / (1.0 - af) * a0),
-                             velocity, g / (b * dt), v0, du0=dt * v0 + 0.5 * dt * dt * a0,
+                             velocity, g / (b * dt), v0, du0=du0,
                              force_scale=self._norm(sim, m[:, None] * v0) / dt
                              + self._norm(sim, m[:, None] * a0))
         t0 = time.perf_counter()
         a1 = accel(du)
-        a1[sim.fixed] = 0.0
+        held = sim.fixed if moving is None else sim.fixed & ~moving
+        a1[held] = 0.0
         v1 = v0 + dt * ((1 - g) * a0 + g * a1)
         v1[~active] = 0.0
-        v1[sim.fixed] = 0.0
+        v1[held] = 0.0
         kt.flip_blend(sim.grid.D, sim.nodes, sim.N, a0, a1, self.flip, p.a)
         kt.g2p(sim.grid.D, sim.nodes, sim.N, du, v0, v1, self.flip, p.x, p.v, p.u)
         sim.timers["g2p"] += time.perf_counter() - t0
