@@ -11,7 +11,7 @@ import numpy as np
 from .boundaries import (ParticleLayer, PrescribedMotion, Robin, RobinForms, Traction, fixed_dofs,
                          prescribed_increment)
 from .boundaries.friction import FrictionalBoundary
-from .boundaries.particle_layer import _pull_back_area, pressure_force
+from .boundaries.particle_layer import pull_back_area, pressure_force
 from .boundaries.robin import facets_on_boundary
 from .io import Probe
 from .io.probe import ReactionProbe
@@ -160,7 +160,8 @@ class SetupMixin:
         d = self.gdim
         t = p.V[sel] ** (1.0 / d) if thickness is None else thickness
         an0 = p.add_field(f"pressure_an0_{k}", (d,))
-        an0[sel] = _pull_back_area(p.F[sel], (p.V[sel] / t)[:, None] * (nrm / np.linalg.norm(nrm)), d)
+        an_now = (p.V[sel] / t)[:, None] * (nrm / np.linalg.norm(nrm))
+        an0[sel] = pull_back_area(p.F[sel], an_now, d)
         self.surface_pressures.append((f"pressure_an0_{k}", value, name))
         return n
 

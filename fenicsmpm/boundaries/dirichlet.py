@@ -58,7 +58,6 @@ class PrescribedMotion:
         v = self.velocity(0.5 * (t0 + t1)) if callable(self.velocity) else self.velocity
         return self.value(v, "velocity") * (t1 - t0)
 
-
     def rates(self, t, dt):
         """(velocity, acceleration) of the dofs at t, one value per component, by central
         differences over dt (implicit Newmark's start-of-step kinematics): from u(t) or v(t);
@@ -73,18 +72,23 @@ class PrescribedMotion:
         return v[1], (v[2] - v[0]) / (2.0 * dt)
 
 
+def _scatter(out, motions, values):
+    """out[dofs of motion m, component c] = values[m][k], c = m.components[k] (a later motion
+    wins)."""
+    for m, val in zip(motions, values):
+        for k, c in enumerate(m.components):
+            out[m.mask[:, c], c] = val[k]
+    return out
+
+
 def prescribed_rates(shape, motions, t, dt):
     """(moving (n_nodes, gdim) bool, velocity, acceleration) of the dofs moved by `motions`
-    at t (PrescribedMotion.rates; a later motion wins)."""
-    moving = np.zeros(shape, dtype=bool)
-    v, a = np.zeros(shape), np.zeros(shape)
-    for m in motions:
-        vm, am = m.rates(t, dt)
-        for k, c in enumerate(m.components):
-            sel = m.mask[:, c]
-            moving[sel, c] = True
-            v[sel, c], a[sel, c] = vm[k], am[k]
-    return moving, v, a
+    at t (PrescribedMotion.rates)."""
+    rates = [m.rates(t, dt) for m in motions]
+    moving = _scatter(np.zeros(shape, dtype=bool), motions, [[True] * len(m.components)
+                                                             for m in motions])
+    return (moving, _scatter(np.zeros(shape), motions, [r[0] for r in rates]),
+            _scatter(np.zeros(shape), motions, [r[1] for r in rates]))
 
 
 def prescribed_increment(node_x, fixed, motions, t0, t1, u=None, fixed_only=True):
@@ -100,8 +104,5 @@ def prescribed_increment(node_x, fixed, motions, t0, t1, u=None, fixed_only=True
         if du.shape != node_x.shape or not np.all(np.isfinite(du)):
             raise ValueError(f"'displacement' u(x, t) must return finite values of shape "
                              f"{node_x.shape} for the node coordinates, got shape {du.shape}")
-    for m in motions:
-        inc = m.increment(t0, t1)
-        for k, c in enumerate(m.components):
-            du[m.mask[:, c], c] = inc[k]
+    _scatter(du, motions, [m.increment(t0, t1) for m in motions])
     return np.where(fixed, du, 0.0) if fixed_only else du

@@ -72,7 +72,7 @@ class ParticleLayer:
         # reference configuration = the current one: the area vector is pulled back through F
         # so that Nanson's formula gives a n = (V / thickness) normal now
         an_now = (p.V[sel] / t)[:, None] * self.normal
-        an0[sel] = _pull_back_area(p.F[sel], an_now, d)
+        an0[sel] = pull_back_area(p.F[sel], an_now, d)
         coef[sel] = (law.a * law.rho * law.cp, law.b * law.rho * law.cs, k_n, k_s)
         u0[sel] = p.u[sel]
         n = int(np.count_nonzero(sel))
@@ -82,7 +82,7 @@ class ParticleLayer:
         return n
 
 
-def _pull_back_area(F, an, d):
+def pull_back_area(F, an, d):
     """A N = F^T a n / J (inverse of Nanson's formula), per particle (set-up only)."""
     return np.einsum("pji,pj->pi", F[:, :d, :d], an) / np.linalg.det(F)[:, None]
 
