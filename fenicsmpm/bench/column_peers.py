@@ -5,7 +5,9 @@ fenicsmpm.problems.sudden_column).
 E = 10 MPa, nu = 0, rho = 2000, H = 10 m, g = 9.81, t = 0 .. 1 s, 2 x 2 particles per cell,
 meshes 1 x 20 (80 particles) and 10 x 100 (4000 particles). Each run uses the library
 defaults, fm.Simulation(grid, particles, fm.Explicit(), dt="auto", gravity=(0, -g)) (shape
-"auto" picks cpGIMP on these grids), the same with shape="mpm" for comparison and (full
+"auto" picks cpGIMP on these grids), the same with shape="mpm" for comparison, the default
+with fm.Explicit(start="leapfrog") (rows "-auto-leapfrog": the central-difference start,
+second order from rest, not the default; docs/guide/integrators.md) and (full
 mode) CB-Geo's own configuration, shape="mpm", fm.Explicit("USF"), dt = 1e-4 (a check that
 these metrics measure what CB-Geo's do).
 
@@ -42,6 +44,7 @@ import time
 import numpy as np
 
 from . import common
+from ..integrators.explicit import Explicit
 from ..problems.sudden_column import PEERS, sudden_column
 
 CASE = "column-peers"
@@ -85,11 +88,14 @@ def _rows_y(sim, ex, comm):
     return top, band, 0.5 * H - 0.25 * h
 
 
-def run_one(cells, shape, comm, t_end=PEERS["t_end"], scheme=None, dt="auto", name=None):
-    """One run (scheme, dt: None / "auto" for the defaults): (record, histories dict of t,
-    simulated and exact signals)."""
+def run_one(cells, shape, comm, t_end=PEERS["t_end"], scheme=None, dt="auto", name=None,
+            start=None):
+    """One run (scheme, dt, start: None / "auto" for the defaults; start: fm.Explicit's
+    `start`): (record, histories dict of t, simulated and exact signals)."""
     t0 = time.perf_counter()
-    sim, ex = sudden_column(cells, shape=shape, scheme=scheme, dt=dt, comm=comm)
+    integrator = None if start is None else Explicit(scheme or "MUSL", start=start)
+    sim, ex = sudden_column(cells, shape=shape, scheme=scheme, integrator=integrator, dt=dt,
+                            comm=comm)
     setup = common.gmax(comm, time.perf_counter() - t0)
     steps = int(np.ceil(t_end / sim.dt - 1e-9))
     step_wall, samples = common.timed_run(sim, steps, every=_sampler(sim, ex))
@@ -120,7 +126,7 @@ def run_one(cells, shape, comm, t_end=PEERS["t_end"], scheme=None, dt="auto", na
              setup_s=setup, step_s=step_wall)
     mesh = f"{cells[0]}x{cells[1]}"
     cfg = dict(integrator=type(sim.integrator).__name__, scheme=sim.integrator.scheme,
-               transfer=sim.integrator.transfer, shape=sim.shape, shape_option=shape, h=ex.h,
+               transfer=sim.integrator.transfer, start=sim.integrator.start, shape=sim.shape, shape_option=shape, h=ex.h,
                dt=sim.dt, dt_option=dt, ppc=2, cell_type="quadrilateral", mesh=mesh, t_end=t_end)
     rec = common.make_record(name or f"{mesh}-{shape}", cfg, sim.particles.n_global(),
                              common.global_cells(sim), steps, setup + step_wall, m)
@@ -133,7 +139,8 @@ def run_one(cells, shape, comm, t_end=PEERS["t_end"], scheme=None, dt="auto", na
 def _verdict(rec):
     tg = TARGETS.get(rec["mesh"])
     cfg = rec["config"]
-    if tg is None or cfg["shape_option"] != "auto" or cfg["dt_option"] != "auto":
+    if (tg is None or cfg["shape_option"] != "auto" or cfg["dt_option"] != "auto"
+            or cfg["start"] != "euler"):
         return "-"
     miss = [k for k in ("top_rms", "mid_rms", "band_rms") if rec["metrics"][k] > tg[k]]
     if "wall_s" in tg and rec["wall_s"] > tg["wall_s"]:
@@ -174,7 +181,7 @@ def report(doc, comm):
 def plot(doc, hist, path, comm):
     fig, axes = common.new_figure(ncols=2, size=(7.0, 4.5))
     a1, a2 = axes[0]
-    hist = {k: v for k, v in hist.items() if k.endswith(("-auto", "-mpm"))}
+    hist = {k: v for k, v in hist.items() if k.endswith(("-auto", "-mpm"))}   # the defaults
     if comm.rank == 0:
         for k, (name, hh) in enumerate(hist.items()):
             style = "-" if name.endswith("auto") else ":"
@@ -199,23 +206,26 @@ def plot(doc, hist, path, comm):
 
 
 def run(quick=False, out="bench-results", comm=None, verbose=True):
-    """Both meshes (quick: 1x20 and 4x40) with the default configuration and shape="mpm";
+    """Both meshes (quick: 1x20 and 4x40) with the default configuration, with shape="mpm"
+    and with fm.Explicit(start="leapfrog");
     writes out/column-peers.json and .png, prints the table; returns the result dict."""
     comm = common.world(comm)
     say = (lambda *a: common.say(comm, f"[{CASE}]", *a)) if verbose else (lambda *a: None)
     meshes = MESHES["quick" if quick else "full"]
-    rows = [(cells, shape, None, "auto", None) for shape in SHAPES for cells in meshes]
+    rows = [(cells, shape, None, "auto", None, None) for shape in SHAPES for cells in meshes]
+    rows += [(cells, "auto", None, "auto", f"{cells[0]}x{cells[1]}-auto-leapfrog", "leapfrog")
+             for cells in meshes]             # the default with fm.Explicit(start="leapfrog")
     if not quick:        # CB-Geo's own configuration: standard MPM, USF, FLIP, dt = 1e-4
-        rows += [(cells, "mpm", "USF", 1e-4, f"{cells[0]}x{cells[1]}-mpm-USF-dt1e-4")
+        rows += [(cells, "mpm", "USF", 1e-4, f"{cells[0]}x{cells[1]}-mpm-USF-dt1e-4", None)
                  for cells in meshes]
     runs, hist, warm = [], {}, set()
-    for cells, shape, scheme, dt, name in rows:
+    for cells, shape, scheme, dt, name, start in rows:
         if (shape, scheme) not in warm:                          # JIT warm-up, untimed
             run_one((1, 4), shape, comm, t_end=0.05, scheme=scheme)
             warm.add((shape, scheme))
-        rec, hh = run_one(cells, shape, comm, scheme=scheme, dt=dt, name=name)
+        rec, hh = run_one(cells, shape, comm, scheme=scheme, dt=dt, name=name, start=start)
         if not quick and dt == "auto":          # a shared machine: the fastest of REPEATS
-            walls = [rec["wall_s"]] + [run_one(cells, shape, comm)[0]["wall_s"]
+            walls = [rec["wall_s"]] + [run_one(cells, shape, comm, start=start)[0]["wall_s"]
                                        for _ in range(REPEATS - 1)]
             rec["wall_s"], rec["wall_s_repeats"] = min(walls), walls
         rec["verdict"] = _verdict(rec)

@@ -34,6 +34,7 @@ _log = logging.getLogger("fenicsmpm")
 
 SCHEMES = ("USF", "USL", "MUSL", "AVG")
 TRANSFERS = ("aflip", "apic", "flip")
+STARTS = ("euler", "leapfrog")
 AFFINE = ("aflip", "apic")      # the transfers that carry the affine matrix apic_C
 PLASTIC_FLIP = 0.99     # the default FLIP fraction when a material flows plastically
 
@@ -53,7 +54,7 @@ class Explicit:
     """Explicit symplectic-Euler MPM with the update order `scheme` ("USF", "USL", "MUSL",
     "AVG"; module docstring) and the FLIP/PIC blend `flip` (1: FLIP, 0: PIC) for particle
     velocities. Needs dt below the critical step (dt="auto" gives cfl * h / c_p). Fills the
-    particle acceleration a = (v_new - v_old) / dt.
+    particle acceleration a = (v_new - v_old) / dt (dt / 2 on a leapfrog start, `start`).
 
     `damping` (1/s, default 0; set as an attribute, as problems.column.DampedExplicit does) adds
     the mass-proportional viscous force -damping m_i v_i^n to the grid momentum balance, where
@@ -68,7 +69,8 @@ class Explicit:
     supports_friction = True
     supports_prescribed_motion = True
 
-    def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None):
+    def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None,
+                 start="euler"):
         """scheme: one of SCHEMES; transfer: one of TRANSFERS (default "flip"; module
         docstring); flip: the FLIP fraction of transfer="flip" or "aflip" (default None:
         `default_flip` of the scene's materials,
@@ -79,7 +81,19 @@ class Explicit:
         coordinates) instead of resting; the force the fixed dofs exert on the material,
         R = m (v - v*) / dt with v* the unconstrained velocity, is sim.nodal["reaction"]
         (summed over ranks), as fm.QuasiStatic(displacement=...) gives it. To move one
-        boundary only: sim.fix(where, components, displacement=u(t) or velocity=v)."""
+        boundary only: sim.fix(where, components, displacement=u(t) or velocity=v).
+
+        start: one of STARTS. "euler" (default): every step updates the velocities over dt,
+        v^1 = v^0 + dt f^0 / m on the first, so a load present at t = 0 starts the response
+        half a step early (a phase error of order dt). "leapfrog": the run's first step updates
+        them over dt / 2 only, v^(1/2) = v^0 + dt/2 f^0 / m (the central-difference start of
+        Belytschko, Liu & Moran 2014, Box 6.1), so positions and stresses are second order in
+        dt from rest (a body in free fall falls g t^2 / 2 exactly; `bench column-peers`, 1 x 20:
+        top-displacement error 1.55 % against 2.14 %), while particle velocities, the kinetic
+        energy and the momentum read after step n belong to t_n - dt/2."""
+        if start not in STARTS:
+            raise ValueError(f"Explicit: 'start' must be one of {STARTS}, got {start!r}")
+        self.start = start
         if displacement is not None and not callable(displacement):
             raise TypeError(f"Explicit: 'displacement' must be None or u(x, t), got {displacement!r}")
         self.displacement, self._vp = displacement, None
@@ -154,6 +168,11 @@ class Explicit:
         kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, v, p.apic_C, x, g.node_x, with_mass, m, mv)
         return m, mv
 
+    def _kick(self, sim, dt):
+        """The time step of this step's velocity update: dt / 2 on a run's first step with
+        start="leapfrog", else dt (constructor docstring)."""
+        return 0.5 * dt if self.start == "leapfrog" and sim.step_count == 0 else dt
+
     def _grid_velocity(self, momentum, inv_m, free):
         """v_i = (m v)_i / m_i on active nodes, 0 on inactive nodes and fixed components."""
         return momentum * inv_m[:, None] * free
@@ -209,15 +228,16 @@ class Explicit:
         if self.damping:                           # mass-proportional damping force
             f -= self.damping * m[:, None] * v0
         t1 = time.perf_counter()
-        v1 = v0 + dt * f * inv_m[:, None] * free
-        reaction = np.where(sim.fixed & active[:, None],          # R = m (v - v*) / dt
-                            m[:, None] * (v1 - (mv + dt * f) * inv_m[:, None]) / dt, 0.0)
+        kick = self._kick(sim, dt)                 # dt, or dt / 2 on a leapfrog start
+        v1 = v0 + kick * f * inv_m[:, None] * free
+        reaction = np.where(sim.fixed & active[:, None],          # R = m (v - v*) / kick
+                            m[:, None] * (v1 - (mv + kick * f) * inv_m[:, None]) / kick, 0.0)
         if vp is not None:                          # the work of moving the fixed dofs
             fr = reaction if fr is None else fr + reaction
         if sim.frictions:                           # contact force m (v1 - v1_trial) / dt
             v_trial = v1.copy()
-            self._contact(sim, v1, dt, m)
-            fc = m[:, None] * (v1 - v_trial) / dt
+            self._contact(sim, v1, kick, m)
+            fc = m[:, None] * (v1 - v_trial) / kick
             fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
@@ -254,4 +274,4 @@ class Explicit:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction, displacement=du)
         np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
-        p.a /= dt
+        p.a /= kick
