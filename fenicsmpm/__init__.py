@@ -26,7 +26,7 @@ bench/ (python -m fenicsmpm.bench), MPI mesh partitioners in partition.
 from .grid import Grid
 from .particles import Particles
 from .materials import Hencky, LinearElastic, NeoHookean, MohrCoulomb, VonMises
-from .materials import Hypoplastic
+from .materials import BiotElastic, Hypoplastic
 from .integrators import Explicit, Newmark, QuasiStatic
 from .integrators import ExplicitGeneralizedAlpha, ImplicitGeneralizedAlpha
 from .contact import ExplicitContact, RigidLoad, set_body
@@ -67,6 +67,6 @@ __all__ = ["Grid", "Particles", "Hencky", "LinearElastic", "NeoHookean", "MohrCo
 __all__ += ["ExplicitGeneralizedAlpha", "ImplicitGeneralizedAlpha"]
 __all__ += ["CompliantBase", "InputMotion", "compliant_base", "rigid_base"]
 __all__ += ["ExplicitContact", "RigidLoad", "set_body"]
-__all__ += ["Hypoplastic"]
+__all__ += ["BiotElastic", "Hypoplastic"]
 __all__ += ["DoubleMappingNewmark", "DoubleMappingQuasiStatic"]
 __all__ += ["ParticlesLeftMesh", "CheckpointNotFoundError"]

@@ -26,7 +26,7 @@ OUT = os.path.join(DOCS, "_generated")
 
 GROUPS = [
     ("Grid, particles, simulation", ["Grid", "Particles", "Simulation"]),
-    ("Materials", ["LinearElastic", "NeoHookean", "Hencky", "MohrCoulomb", "VonMises",
+    ("Materials", ["LinearElastic", "NeoHookean", "Hencky", "BiotElastic", "MohrCoulomb", "VonMises",
                    "Hypoplastic"]),
     ("Integrators", ["Explicit", "ExplicitGeneralizedAlpha", "Newmark", "QuasiStatic",
                      "ImplicitGeneralizedAlpha", "DoubleMappingNewmark",

@@ -13,6 +13,7 @@ Interface of a material (see LinearElastic):
                                  dsig = d sigma_new / d dF, with `state` the committed history
     density, p_wave_speed        for masses and the critical time step
 """
+from .biot import BiotElastic
 from .hencky import Hencky
 from .hypoplastic import Hypoplastic
 from .linear_elastic import LinearElastic
@@ -21,7 +22,7 @@ from .neo_hookean import NeoHookean
 from .von_mises import VonMises
 from .piola import first_piola, first_piola_tangent, strain_energy_increment
 
-__all__ = ["Hencky", "Hypoplastic", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
+__all__ = ["BiotElastic", "Hencky", "Hypoplastic", "LinearElastic", "NeoHookean", "MohrCoulomb", "VonMises", "first_piola",
            "first_piola_tangent", "strain_energy_increment", "constrained_moduli"]
 
 

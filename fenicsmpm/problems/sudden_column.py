@@ -74,19 +74,21 @@ class SuddenColumnExact:
 
 def sudden_column(cells=(1, 20), per_cell=2, shape="auto", scheme=None, integrator=None,
                   dt="auto", cfl=0.5, height=PEERS["height"], E=PEERS["E"], nu=PEERS["nu"],
-                  density=PEERS["density"], g=PEERS["g"], terms=4000, comm=MPI.COMM_WORLD):
+                  density=PEERS["density"], g=PEERS["g"], terms=4000, comm=MPI.COMM_WORLD,
+                  material=LinearElastic):
     """The PEERS.md column on an nx x ny grid of square cells (cells = (nx, ny), h = H / ny,
     width nx h), with the library defaults: fm.Simulation(grid, particles, fm.Explicit(),
     dt="auto", gravity=(0, -g)) and shape="auto" unless `shape` is given; `scheme` (e.g.
     "USF") or a ready `integrator` replace fm.Explicit()'s defaults; dt, cfl: as for
     fm.Simulation (dt="auto" is cfl * h / c_p, cfl 0.5 its default). Returns (sim, exact),
-    exact a SuddenColumnExact with `h` and `cells` added."""
+    exact a SuddenColumnExact with `h` and `cells` added. `material`: the elastic class
+    (fm.LinearElastic; fm.BiotElastic follows the linear column at any amplitude)."""
     nx, ny = (int(n) for n in cells)
     h = height / ny
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [nx * h, height]], [nx, ny],
                                  dmesh.CellType.quadrilateral)
     grid = Grid(msh)
-    mat = LinearElastic(E=E, nu=nu, density=density)
+    mat = material(E=E, nu=nu, density=density)
     pts = Particles.fill(grid, mat, per_cell=per_cell)
     if integrator is None:
         integrator = Explicit() if scheme is None else Explicit(scheme)
