@@ -12,8 +12,7 @@ Jaumann-rate fm.LinearElastic gives E ln(l) and the Hencky model E ln(l) / l. A 
 leaves it stress-free; at small strain it is fm.LinearElastic. Under strong compression it is
 not stable (the nominal stress stays finite as l -> 0): for elastic strains of a few percent.
 
-Tangent with respect to the increment dF (exact, consistent with `stress`), as for Hencky:
-    db / d dF_kl = e_k (x) (F_old F^T)_l. + transpose,
+Tangent with respect to the increment dF (exact, consistent with `stress`; materials.spectral):
     dV = sum_ac (n_a . db n_c) n_a (x) n_c / (sqrt(l_a) + sqrt(l_c))   (Daleckii-Krein for
          V = sqrt(b), b = sum_a l_a n_a (x) n_a; no singular limit),
     d tau = lambda tr(dV) V + lambda (tr V - 3) dV + 2 mu (db - dV),
@@ -25,33 +24,12 @@ import math
 import numba
 import numpy as np
 
-from .hencky import _eig_b
-from .neo_hookean import IsotropicHyperelastic, _current_F
-from .piola import det3, inv3
+from .neo_hookean import IsotropicHyperelastic
+from .piola import det3
+from .spectral import BIOT, current_F, nan_stress, spectral_stress, spectral_tangent
 from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 __all__ = ["BiotElastic", "biot_stress_kernel", "biot_tangent_kernel"]
-
-
-@numba.njit(cache=True)
-def _v_tau(lam, Q, la, mu, V, tau):
-    """V = sqrt(b) and the Kirchhoff stress lambda (tr V - 3) V + 2 mu (b - V) from the
-    eigenvalues lam and eigenvectors Q (columns) of b."""
-    s = np.empty(3)
-    for a in range(3):
-        s[a] = math.sqrt(lam[a])
-    trv = s[0] + s[1] + s[2] - 3.0
-    for i in range(3):
-        for j in range(3):
-            v = 0.0
-            t = 0.0
-            for a in range(3):
-                qq = Q[i, a] * Q[j, a]
-                v += s[a] * qq
-                t += (la * trv * s[a] + 2.0 * mu * (lam[a] - s[a])) * qq
-            V[i, j] = v
-            tau[i, j] = t
-    return trv
 
 
 @numba.njit(cache=True)
@@ -78,27 +56,16 @@ def _plane_sigma(F, J, la, mu, s):
 @numba.njit(cache=True)
 def _stress(idx, dF, F_old, sigma_new, la, mu, lo, hi):
     F = np.empty((3, 3))
-    lam = np.empty(3)
-    Q = np.empty((3, 3))
-    V = np.empty((3, 3))
-    tau = np.empty((3, 3))
     for q in range(lo, hi):
         p = idx[q]
-        _current_F(dF, F_old, p, F)
+        current_F(dF, F_old, p, F)
         J = det3(F)
         if not J > 0.0:
-            for i in range(3):
-                for j in range(3):
-                    sigma_new[p, i, j] = np.nan
-            continue
-        if F[0, 2] == 0.0 and F[1, 2] == 0.0 and F[2, 0] == 0.0 and F[2, 1] == 0.0:
+            nan_stress(sigma_new, p)
+        elif F[0, 2] == 0.0 and F[1, 2] == 0.0 and F[2, 0] == 0.0 and F[2, 1] == 0.0:
             _plane_sigma(F, J, la, mu, sigma_new[p])
-            continue
-        _eig_b(F, lam, Q)
-        _v_tau(lam, Q, la, mu, V, tau)
-        for i in range(3):
-            for j in range(3):
-                sigma_new[p, i, j] = tau[i, j] / J
+        else:
+            spectral_stress(BIOT, idx, dF, F_old, sigma_new, la, mu, q, q + 1)
 
 
 @numba.njit(parallel=PRANGE, cache=True)
@@ -117,77 +84,9 @@ def biot_stress_kernel(idx, dF, F_old, sigma_new, la, mu):
 
 @numba.njit(cache=True)
 def biot_tangent_kernel(idx, dF, F_old, dsig, la, mu):
-    """dsig[p,i,j,k,l] = d sigma_ij / d dF_kl (module docstring); NaN if J <= 0."""
-    F = np.empty((3, 3))
-    lam = np.empty(3)
-    Q = np.empty((3, 3))
-    V = np.empty((3, 3))
-    tau = np.empty((3, 3))
-    dFinv = np.empty((3, 3))
-    G0 = np.empty((3, 3))     # F_old F^T
-    f = np.empty((3, 3))
-    db = np.empty((3, 3))
-    bq = np.empty((3, 3))     # Q^T db Q, then scaled by f (dV in the eigenbasis)
-    tmp = np.empty((3, 3))
-    for q in range(idx.shape[0]):
-        p = idx[q]
-        _current_F(dF, F_old, p, F)
-        J = det3(F)
-        if not J > 0.0:
-            for i in range(3):
-                for j in range(3):
-                    for k in range(3):
-                        for l in range(3):
-                            dsig[p, i, j, k, l] = np.nan
-            continue
-        _eig_b(F, lam, Q)
-        trv = _v_tau(lam, Q, la, mu, V, tau)
-        inv3(dF[p], dFinv)
-        for i in range(3):
-            for j in range(3):
-                g = 0.0
-                for m in range(3):
-                    g += F_old[p, i, m] * F[j, m]
-                G0[i, j] = g
-        for a in range(3):
-            for c in range(3):
-                f[a, c] = 1.0 / (math.sqrt(lam[a]) + math.sqrt(lam[c]))
-        for k in range(3):
-            for l in range(3):
-                for i in range(3):            # db_ij = d_ik G0_lj + d_jk G0_li
-                    for j in range(3):
-                        v = 0.0
-                        if i == k:
-                            v += G0[l, j]
-                        if j == k:
-                            v += G0[l, i]
-                        db[i, j] = v
-                for i in range(3):            # bq = f o (Q^T db Q)
-                    for c in range(3):
-                        s = 0.0
-                        for m in range(3):
-                            s += db[i, m] * Q[m, c]
-                        tmp[i, c] = s
-                for a in range(3):
-                    for c in range(3):
-                        s = 0.0
-                        for m in range(3):
-                            s += Q[m, a] * tmp[m, c]
-                        bq[a, c] = f[a, c] * s
-                trdv = bq[0, 0] + bq[1, 1] + bq[2, 2]
-                for i in range(3):            # dV = Q bq Q^T
-                    for c in range(3):
-                        s = 0.0
-                        for a in range(3):
-                            s += Q[i, a] * bq[a, c]
-                        tmp[i, c] = s
-                for i in range(3):
-                    for j in range(3):
-                        dv = 0.0
-                        for c in range(3):
-                            dv += tmp[i, c] * Q[j, c]
-                        dtau = la * trdv * V[i, j] + la * trv * dv + 2.0 * mu * (db[i, j] - dv)
-                        dsig[p, i, j, k, l] = dtau / J - tau[i, j] / J * dFinv[l, k]
+    """dsig[p,i,j,k,l] = d sigma_ij / d dF_kl (module docstring, materials.spectral); NaN if
+    J <= 0."""
+    spectral_tangent(BIOT, idx, dF, F_old, dsig, la, mu)
 
 
 class BiotElastic(IsotropicHyperelastic):

@@ -16,18 +16,9 @@ import numpy as np
 
 from .linear_elastic import IsotropicElasticParameters
 from .piola import det3, inv3
+from .spectral import current_F, nan_stress, nan_tangent, old_times_current
 
 __all__ = ["NeoHookean", "neo_hookean_stress_kernel", "neo_hookean_tangent_kernel"]
-
-
-@numba.njit(cache=True)
-def _current_F(dF, F_old, p, F):
-    for i in range(3):
-        for j in range(3):
-            s = 0.0
-            for m in range(3):
-                s += dF[p, i, m] * F_old[p, m, j]
-            F[i, j] = s
 
 
 @numba.njit(cache=True)
@@ -36,12 +27,10 @@ def neo_hookean_stress_kernel(idx, dF, F_old, sigma_new, lam, mu):
     F = np.empty((3, 3))
     for q in range(idx.shape[0]):
         p = idx[q]
-        _current_F(dF, F_old, p, F)
+        current_F(dF, F_old, p, F)
         J = det3(F)
         if not J > 0.0:
-            for i in range(3):
-                for j in range(3):
-                    sigma_new[p, i, j] = np.nan
+            nan_stress(sigma_new, p)
             continue
         pv = lam * math.log(J) / J
         for i in range(3):
@@ -64,25 +53,19 @@ def neo_hookean_tangent_kernel(idx, dF, F_old, dsig, lam, mu):
     A = np.empty((3, 3))     # [lam (1 - ln J) d_ij - mu (b - I)_ij] / J
     for q in range(idx.shape[0]):
         p = idx[q]
-        _current_F(dF, F_old, p, F)
+        current_F(dF, F_old, p, F)
         J = det3(F)
         if not J > 0.0:
-            for i in range(3):
-                for j in range(3):
-                    for k in range(3):
-                        for l in range(3):
-                            dsig[p, i, j, k, l] = np.nan
+            nan_tangent(dsig, p)
             continue
         inv3(dF[p], dFinv)
         lnJ = math.log(J)
+        old_times_current(F_old, p, F, G0)
         for i in range(3):
             for j in range(3):
-                g = 0.0
                 b = 0.0
                 for m in range(3):
-                    g += F_old[p, i, m] * F[j, m]
                     b += F[i, m] * F[j, m]
-                G0[i, j] = g
                 a = -mu * b
                 if i == j:
                     a += mu + lam * (1.0 - lnJ)
