@@ -8,6 +8,7 @@ import os
 import re
 from pathlib import Path
 
+import pytest
 from mpi4py import MPI
 
 from demo_helpers import exist_on_rank0, load_demo
@@ -51,6 +52,7 @@ def test_readme_example(shared_module_tmp_path, monkeypatch, capsys):
         assert "sigma_yy under the load" in capsys.readouterr().out
 
 
+@pytest.mark.heavy
 def test_biaxial_test_demo(shared_module_tmp_path):
     """Seed 004's biaxial test in MPM (--quick: 50 quasi-static steps, 64 particles): the
     deviatoric stress follows the element test within 1 % at 1 / 2 / 5 / 10 % axial strain
