@@ -1,9 +1,10 @@
 """Semi-linear (Biot-strain) hyperelasticity: linear elasticity in the Biot strain U - I.
 
 F = dF F_old = R U = V R, J = det F, b = F F^T = V^2; stored energy
-W(U) = lambda/2 tr(U - I)^2 + mu |U - I|^2, whose Biot stress T = dW/dU = lambda tr(U - I) I
-+ 2 mu (U - I) is coaxial with U, so (Ogden, *Non-linear Elastic Deformations*, 1984,
-sec. 4.3.4 and 6.1.4: the "semi-linear" material)
+W(U) = lambda/2 tr(U - I)^2 + mu |U - I|^2 (linear elasticity in the Biot strain U - I of
+the Seth-Hill strain family; Ogden, *Non-linear Elastic Deformations*, 1984, on strain
+measures and their conjugate stresses), whose Biot stress T = dW/dU =
+lambda tr(U - I) I + 2 mu (U - I) is coaxial with U, so
     tau   = R T U R^T = lambda (tr V - 3) V + 2 mu (b - V)      (Kirchhoff stress),
     sigma = tau / J                                               (Cauchy stress).
 Its nominal stress in uniaxial strain with nu = 0 (stretch l) is exactly E (l - 1): a 1D
