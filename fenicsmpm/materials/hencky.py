@@ -25,7 +25,7 @@ __all__ = ["Hencky", "hencky_stress_kernel", "hencky_tangent_kernel"]
 @numba.njit(cache=True)
 def hencky_stress_kernel(idx, dF, F_old, sigma_new, la, mu):
     """sigma = (lambda tr(eps) I + 2 mu eps) / J, eps = ln(F F^T) / 2, F = dF F_old; NaN if J <= 0."""
-    spectral_stress(HENCKY, idx, dF, F_old, sigma_new, la, mu, 0, idx.shape[0])
+    spectral_stress(HENCKY, idx, dF, F_old, sigma_new, la, mu)
 
 
 @numba.njit(cache=True)

@@ -21,6 +21,7 @@ import numba
 import numpy as np
 
 from .piola import det3, eigh3, inv3
+from ..kernels.threads import PRANGE, chunk, particle_chunks
 
 HENCKY, BIOT = 0, 1
 
@@ -124,8 +125,28 @@ def kirchhoff(model, lam, Q, la, mu, X, tau):
 
 
 @numba.njit(cache=True)
-def spectral_stress(model, idx, dF, F_old, sigma_new, la, mu, lo, hi):
-    """sigma = tau / J of `model` for the particles idx[lo:hi]; NaN if J <= 0."""
+def plane_biot_sigma(F, J, la, mu, s):
+    """BIOT sigma of an in-plane F (F_i2 = F_2i = 0 for i < 2) without an eigensolve: the
+    in-plane block of V = sqrt(b) is (b + sqrt(det b) I) / sqrt(tr b + 2 sqrt(det b)) (2 x 2
+    SPD square root), V_22 = |F_22|."""
+    b00 = F[0, 0] * F[0, 0] + F[0, 1] * F[0, 1]
+    b01 = F[0, 0] * F[1, 0] + F[0, 1] * F[1, 1]
+    b11 = F[1, 0] * F[1, 0] + F[1, 1] * F[1, 1]
+    r = math.sqrt(b00 * b11 - b01 * b01)
+    k = 1.0 / math.sqrt(b00 + b11 + 2.0 * r)
+    v00, v01, v11, v22 = (b00 + r) * k, b01 * k, (b11 + r) * k, abs(F[2, 2])
+    a = la * (v00 + v11 + v22 - 3.0)
+    for i in range(3):
+        for j in range(3):
+            s[i, j] = 0.0
+    s[0, 0] = (a * v00 + 2.0 * mu * (b00 - v00)) / J
+    s[1, 1] = (a * v11 + 2.0 * mu * (b11 - v11)) / J
+    s[0, 1] = s[1, 0] = (a * v01 + 2.0 * mu * (b01 - v01)) / J
+    s[2, 2] = (a * v22 + 2.0 * mu * (v22 * v22 - v22)) / J
+
+
+@numba.njit(cache=True)
+def _stress(model, idx, dF, F_old, sigma_new, la, mu, lo, hi):
     F = np.empty((3, 3))
     lam = np.empty(3)
     Q = np.empty((3, 3))
@@ -138,11 +159,29 @@ def spectral_stress(model, idx, dF, F_old, sigma_new, la, mu, lo, hi):
         if not J > 0.0:
             nan_stress(sigma_new, p)
             continue
+        if model == BIOT and F[0, 2] == 0.0 and F[1, 2] == 0.0 and F[2, 0] == 0.0 \
+                and F[2, 1] == 0.0:
+            plane_biot_sigma(F, J, la, mu, sigma_new[p])
+            continue
         eig_b(F, lam, Q)
         kirchhoff(model, lam, Q, la, mu, X, tau)
         for i in range(3):
             for j in range(3):
                 sigma_new[p, i, j] = tau[i, j] / J
+
+
+@numba.njit(parallel=PRANGE, cache=True)
+def spectral_stress(model, idx, dF, F_old, sigma_new, la, mu):
+    """sigma = tau / J of `model` for the particles idx; NaN if J <= 0 (threaded over chunks of
+    idx, kernels.threads; BIOT with an in-plane F: plane_biot_sigma)."""
+    n = idx.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
+        _stress(model, idx, dF, F_old, sigma_new, la, mu, np.int64(0), n)
+        return
+    for c in numba.prange(nc):
+        lo, hi = chunk(n, nc, c)
+        _stress(model, idx, dF, F_old, sigma_new, la, mu, lo, hi)
 
 
 @numba.njit(cache=True)
