@@ -31,6 +31,12 @@ bisection: on [F_LO, 1] if the unreduced slope fails (F_LO = 0.25, --quick 0.5; 
 stable first), on [1, F_HI = 2] otherwise, down to a bracket width of 0.05 (--quick: 0.25,
 that is one bisection step).
 
+Reference: Bishop's simplified limit equilibrium over circular slip surfaces
+(fenicsmpm.problems.slope_stability.bishop) gives F = 0.598 for this slope. Measured
+(serial, 50 x 27 cells): the defaults (the standard family for Mohr-Coulomb) stable at
+F = 0.531, fail at 0.578; --shape cpgimp (2026-12-06) stable at 0.625 (crest motion in the
+hold 0.19 m), fails at 0.672 (4.6 m), 95.6 s wall (docs/measured.md).
+
 Printed and returned:
   unreduced       failed or not at F = 1, its final mean speed and crest displacement,
   bracket         (F_stable, F_failed) with F_stable < F_s <= F_failed, and every run's
@@ -52,6 +58,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
+from fenicsmpm.problems.slope_stability import bishop
 from fenicsmpm.io import particle_raster
 
 comm = MPI.COMM_WORLD
@@ -157,7 +164,7 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="coarse grid, wide bracket")
     parser.add_argument("--fbar", action="store_true", help="Simulation(fbar=True) (F-bar)")
     parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
-                        "'auto': the standard family for this plastic soil)")
+                        "'auto': cpGIMP for Mohr-Coulomb on this grid)")
     args = parser.parse_args(argv)
     if args.quick:
         cells, t_ramp, t_hold, f_lo, tol = (20, 11), 6.0, 6.0, 0.5, 0.25
@@ -191,6 +198,8 @@ def main(argv=None):
                    unreduced=strip(base), runs=[strip(r) for r in runs],
                    factor_of_safety=0.5 * (lo + hi) if ok else float("nan"), wall_s=wall)
     if comm.rank == 0:
+        bishop_factor = bishop(surface, RHO * G, C, PHI, (0.0, L))["factor"]
+        metrics["bishop_factor"] = bishop_factor
         png = os.path.join(args.out, "slope_failure.png")
         plot(base, runs, (lo, hi), png)
         print(f"\nSlope failure (L4), {cells[0]} x {cells[1]} cells, {base['n_particles']} particles, "
@@ -210,6 +219,8 @@ def main(argv=None):
                   f"(F_s ~ {0.5 * (lo + hi):.3f})")
         else:
             print(f"no bracket: both ends of the interval {'fail' if base['failed'] else 'are stable'}")
+        print(f"reference: Bishop's simplified method (circular slip surfaces, "
+              f"fenicsmpm.problems.slope_stability): F = {bishop_factor:.3f}")
         print(f"\nplot: {png}")
         metrics["png"] = png
     return comm.bcast(metrics, root=0)

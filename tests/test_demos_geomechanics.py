@@ -10,9 +10,11 @@ Assertions and their reasons:
     (H = 8 m), the mean speed rose from rest and is below its peak at the end, and plastic
     strain developed (max eps_d^p > 0.1).
   slope (L4, 20 x 11 cells): the unreduced phi = 18 deg, c = 5 kPa slope is reported and
-    fails (the seed's slide; an infinite-slope estimate gives tan 18 / tan 33.7 = 0.49 < 1),
-    the bisection bracket is valid (stable at its lower end, failed at its upper end), lies in
-    (0, 1] and is 0.25 wide; the failed runs moved the crest by more than the stable ones.
+    fails (the seed's slide; Bishop's simplified method gives F = 0.598 < 1, reported by the
+    demo, within 0.5 % of that), the bisection bracket is valid (stable at its lower end,
+    failed at its upper end), lies in (0, 1], is 0.25 wide and holds Bishop's factor
+    (measured (0.5, 0.75], with the standard family and with cpGIMP); the failed runs moved the crest by more
+    than the stable ones.
   strip footing (W5, dx = 0.25 m, first pulse, fixed and viscous bases): the geostatic
     sigma_yy of the bottom particle row matches -rho g d within 2 % and the surface settles
     by the 1D elastic closed form rho g (H y0 - y0^2/2) / M within 1 % (the quasi-static
@@ -62,6 +64,8 @@ def test_slope_failure_demo(shared_module_tmp_path):
     assert m["bracket_valid"], m
     lo, hi = m["bracket"]
     assert 0.0 < lo < hi <= 1.0 and abs(hi - lo - 0.25) < 1e-12, m
+    assert abs(m["bishop_factor"] / 0.598 - 1.0) < 5e-3, m["bishop_factor"]
+    assert lo < m["bishop_factor"] <= hi, m          # measured (0.5, 0.75]
     by_f = {r["factor"]: r for r in m["runs"]}
     assert not by_f[lo]["failed"] and by_f[hi]["failed"], m["runs"]
     stable = [r["crest_u_hold"] for r in m["runs"] if not r["failed"]]

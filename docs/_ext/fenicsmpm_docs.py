@@ -43,6 +43,7 @@ MODULES = [
     ("fenicsmpm.materials.element_test", "Element tests of materials"),
     ("fenicsmpm.materials.initial_stress", "Initial (K0) stress"),
     ("fenicsmpm.boundaries.friction", "Rough and frictional bases"),
+    ("fenicsmpm.problems.slope_stability", "Slope stability by limit equilibrium (Bishop)"),
     ("fenicsmpm.errors", "Exceptions"),
     ("fenicsmpm.io.compiler_log", "Form-compiler output"),
     ("fenicsmpm.io", "Probe, output writers and particle rasters"),

@@ -14,4 +14,5 @@ solution and error measures, shared by the tests, the demos and the benchmark su
     footing            Prandtl's smooth strip footing on Tresca soil (F-bar)
     granular_collapse  dry granular column on a rough base against Lube et al.'s (2005) laws
     softening_slope    a softening Mohr-Coulomb slope that fails and runs out (run-out vs h)
+    slope_stability    Bishop's limit-equilibrium factor of safety (the L4 slope's reference)
 """
