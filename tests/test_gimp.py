@@ -155,6 +155,35 @@ def test_a_cpgimp_box_stretches_to_one_cell_each_side_and_no_further(rng):
     assert worst < 1e-12 and width <= 4 * 3, (pu, grad, same, width)
 
 
+def test_a_cpgimp_box_stops_at_the_grid_boundary():
+    """A cpGIMP box never reaches past the grid's boundary: its half-width is capped at the
+    particle's distance to it (gimp module docstring). Particles at depth eps = 0.01 L / 0.1 L
+    above the base y = 0, stretched 20x along y (half-width L uncapped), take from
+    a nodal field that is 0 on the base row and 1 on every other node exactly eps / L, as the
+    standard family does, and the affine reproduction stays exact (1e-12). Before the cap
+    the box was clipped to [0, eps + L] and the particle took (eps + L) / 2L, about one half
+    of the velocity of the row above: a fixed or rough base could not hold it, and stretched
+    particles of the softening slope were carried out through the rough base
+    (docs/guide/choosing.md)."""
+    grid = structured(MPI.COMM_WORLD, CT.quadrilateral)
+    L = grid._structured["spacing"]
+    pts = fm.Particles.fill(grid, fm.LinearElastic(E=1e3, nu=0.3, density=1.0), per_cell=2)
+    sim = fm.Simulation(grid, pts, fm.Explicit(), dt=1e-5, shape="cpgimp")
+    eps = np.where(pts.x[:, 1] < 0.5 * L[1], 0.01, 0.1) * L[1]
+    low = pts.x[:, 1] < L[1]                    # the particles of the bottom cell row
+    pts.x[low, 1] = eps[low]
+    pts.F[low, 1, 1] = 20.0
+    sim.locate_and_shape()
+    field = (grid.node_x[:, 1] > 1e-9).astype(float)
+    got = (sim.N * field[sim.nodes]).sum(axis=1)
+    A = np.array([[0.3, -0.2], [0.5, 0.1]])
+    u = grid.node_x @ A.T
+    affine = np.abs(np.einsum("pa,paj->pj", sim.N, u[sim.nodes]) - pts.x @ A.T).max() if len(pts) else 0.0
+    err = np.abs(got[low] - eps[low] / L[1]).max() if low.any() else 0.0
+    comm = MPI.COMM_WORLD
+    assert comm.allreduce(max(err, affine), op=MPI.MAX) < 1e-12, (err, affine)
+
+
 def soft_column(shape, comm=MPI.COMM_WORLD, n_cells=20, cell_type=CT.quadrilateral):
     """BENCHMARKS L1 soft column, explicit MUSL, seed-002 sine ramp of gravity over T/2,
     held to T. Returns (initial positions X0, sigma_yy) of the local particles."""

@@ -15,9 +15,13 @@ corrected in BENCHMARKS.md ("GIMP weight"), with xi = x_p - x_i:
     1 - (xi^2 + l_p^2) / (2 L l_p)        |xi| <= l_p
     1 - xi / L                            l_p < xi <= L - l_p
     (L + l_p - xi)^2 / (4 L l_p)          L - l_p < xi <= L + l_p,   0 beyond,
-and stays valid for l_p > L/2 (stretched cpGIMP particles). Where a box pokes out of the
-grid it is cut at the grid boundary ([a, b] clipped to the grid's extent), so the weights
-still sum to 1 and the gradients to 0.
+and stays valid for l_p > L/2 (stretched cpGIMP particles). A cpGIMP box never reaches past
+the grid's boundary: its half-width is capped at the particle's distance to it (since
+2026-12-06), so the weights still sum to 1, the gradients to 0, and the velocity a particle
+takes from the grid vanishes at a held wall as with the standard family. Cutting the box at
+the boundary instead (before; uGIMP boxes still are) left a particle at the wall with about
+half the velocity of the node row above it: stretched particles of the softening slope
+(problems.softening_slope, cpGIMP, H/32 and H/64) were carried out through its rough base.
 
 uGIMP keeps l_p = l_p^0; cpGIMP (contiguous particle GIMP, Wallstedt & Guilkey 2008) uses
 l_p,k = min(l_p,k^0 |F_kk|, L_k) (the box follows the stretch along each axis, up to one cell
@@ -175,6 +179,8 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
         for k in range(d):
             L = spacing[k]
             lp = half_width(lp0[p, k], F[p, k, k], L, contiguous)
+            if contiguous:      # cpGIMP: the box stops at the grid boundary (docstring)
+                lp = max(min(lp, x[p, k] - lo[k], hi[k] - x[p, k]), 1e-9 * L)
             a = max(x[p, k] - lp, lo[k])
             b = min(x[p, k] + lp, hi[k])
             j0 = int(np.floor((a - origin[k]) / L))     # the last node at or below a ...
