@@ -115,7 +115,7 @@ def main(argv=None):
     parser.add_argument("--quick", action="store_true", help="coarse grid (a few seconds)")
     parser.add_argument("--fbar", action="store_true", help="Simulation(fbar=True) (F-bar)")
     parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
-                        "'auto': the standard family for this plastic soil)")
+                        "'auto': cpGIMP for Mohr-Coulomb on this grid)")
     args = parser.parse_args(argv)
     h, dt, t_max = (0.8, 2e-3, 2.0) if args.quick else (0.4, 1e-3, 4.0)
     if comm.rank == 0:

@@ -26,9 +26,15 @@ vertical stress below the tip at the end, and the resistance against two closed-
 estimates at the final depth d: shaft friction mu K0 (rho g d / 2) 2 pi r d and the tip
 bearing N_q rho g d pi r^2 with N_q = exp(pi tan phi) tan^2(45 + phi / 2) = 18.4 (both
 rough: the pile displaces the soil and changes K).
-Measured (serial, 2026-12-05; the default shape is the standard family for Mohr-Coulomb;
+Measured (serial, 2026-12-06; the default shape is cpGIMP for Mohr-Coulomb since that day;
 friction against the rigid pile only at the nodes on its side of its surface,
 fenicsmpm.contact.multi_velocity):
+h = 0.3 m (--quick), 0.6 s: penetration 0.275 m, resistance 28.4 kN against 7.0 kN
+estimated, sigma_zz below the tip -331.6 kPa (9.7 s wall). To 1 s (0.474 m; estimate
+12.1 kN), `--h H --t-end 1`: 48.1 / 19.4 / 59.4 kN at h = 0.3 / 0.15 / 0.075 m (2291 / 8832 /
+35990 particles, 17 / 68 / 875 s, the last two beside other runs), sigma_zz below the tip
+-873 / -992 / -1464 kPa.
+With the standard family (--shape mpm, the default before; 2026-12-05):
 h = 0.3 m (--quick), 0.6 s: penetration 0.274 m, resistance 16.3 kN against 7.0 kN
 estimated, sigma_zz below the tip -196.9 kPa (4.2 s wall). To 1 s (0.474 m; estimate 12.1 kN),
 `--h H --t-end 1`: 27.0 / 15.5 kN at h = 0.3 / 0.15 m (2291 / 8832 particles, 7 / 32 s),
@@ -120,7 +126,7 @@ def main(argv=None):
     parser.add_argument("--out", default="results/pile_jacking", help="output directory")
     parser.add_argument("--quick", action="store_true", help="h = 0.3 m, 0.25 m penetration")
     parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
-                        "'auto': the standard family for this plastic soil)")
+                        "'auto': cpGIMP for Mohr-Coulomb on this grid)")
     parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
     parser.add_argument("--h", type=float, default=None,
                         help="cell size [m] (default 0.15; --quick 0.3)")

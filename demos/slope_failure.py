@@ -33,9 +33,10 @@ that is one bisection step).
 
 Reference: Bishop's simplified limit equilibrium over circular slip surfaces
 (fenicsmpm.problems.slope_stability.bishop) gives F = 0.598 for this slope. Measured
-(serial, 50 x 27 cells): the defaults (the standard family for Mohr-Coulomb) stable at
-F = 0.531, fail at 0.578; --shape cpgimp (2026-12-06) stable at 0.625 (crest motion in the
-hold 0.19 m), fails at 0.672 (4.6 m), 95.6 s wall (docs/measured.md).
+(serial, 50 x 27 cells): the defaults (cpGIMP for Mohr-Coulomb since 2026-12-06) stable
+at 0.625 (crest motion in the hold 0.19 m), fail at 0.672 (4.6 m), 95.6 s wall; the standard
+family (--shape mpm, the default before) stable at F = 0.531, fails at 0.578
+(docs/measured.md).
 
 Printed and returned:
   unreduced       failed or not at F = 1, its final mean speed and crest displacement,

@@ -46,19 +46,21 @@ def _left(x):
 
 
 @pytest.mark.parametrize("integrator,shape", [(fm.QuasiStatic, "cpgimp"), (fm.QuasiStatic, "auto"),
-                                              (fm.Explicit, "auto")])
+                                              (fm.Explicit, "auto"), (fm.Explicit, "mpm")])
 def test_confining_pressure_follows_the_bulging_sample(integrator, shape):
     """At 5 % axial strain the sample is 0.95 m high and its loaded column has moved out by
     more than 3 cm into cells beyond x = 1 (the facet traction of add_traction acts on mesh
     facets and could not follow it). The left rollers carry the pressure times the current
-    height, S0 (1 + EPS) per metre, within 0.5 % (measured +0.26 / +0.23 % quasi-static with
-    cpGIMP / the standard family, -0.46 % explicit): the area a_p = J |F^-T A_p N| shrank with
-    the sample. With cpGIMP the particles away from the loaded column (x < 0.75 m) carry
-    sigma_xx = -S0 and the element test's sigma_yy = -3 S0 (the Mohr-Coulomb limit) within
-    0.5 % (measured +0.06 / -0.06 %); the standard family (the default for Mohr-Coulomb)
-    under-reads both by about 5 % (measured -5.0 % quasi-static, -4.6 % explicit: its
-    particles spread beyond their cells as the sample bulges and its point quadrature does
-    not see it), asserted within 6 %."""
+    height, S0 (1 + EPS) per metre, within 0.5 % quasi-statically (measured +0.26 / +0.23 %
+    with cpGIMP / the standard family, the default for implicit Mohr-Coulomb) and explicitly
+    with the standard family (-0.46 %), within 1 % explicitly with cpGIMP, the default there
+    since 2026-12-06 (+0.70 %): the area a_p = J |F^-T A_p N| shrank with the sample. The
+    particles away from the loaded column (x < 0.75 m) carry sigma_xx = -S0 and the element
+    test's sigma_yy = -3 S0 (the Mohr-Coulomb limit) within 0.5 % quasi-statically with
+    cpGIMP (measured +0.06 / -0.06 %) and within 2 % explicitly (+1.81 / +1.70 %, the top
+    moved at 5 % a second); the standard family under-reads both by about 5 % (measured
+    -5.0 % quasi-static, -4.6 % explicit: its particles spread beyond their cells as the
+    sample bulges and its point quadrature does not see it), asserted within 6 %."""
     sim = _biaxial(integrator(), shape)
     sim.run(t_end=1.0 - 1e-9)
     p = sim.particles
@@ -73,8 +75,9 @@ def test_confining_pressure_follows_the_bulging_sample(integrator, shape):
         print(f"\n{integrator.__name__} {sim.shape}: reaction {rx / (S0 * (1 + EPS)) - 1:+.3%}, "
               f"sigma_xx {sxx / -S0 - 1:+.3%}, sigma_yy {syy / ref - 1:+.3%}, x max {xmax:.4f}")
     assert xmax > 0.9375 + 0.03                       # the loaded column moved out by > 3 cm
-    assert abs(rx / (S0 * (1 + EPS)) - 1) < 0.005, rx
-    tol = 0.005 if sim.shape == "cpgimp" else 0.06
+    explicit_cpgimp = integrator is fm.Explicit and sim.shape == "cpgimp"
+    assert abs(rx / (S0 * (1 + EPS)) - 1) < (0.01 if explicit_cpgimp else 0.005), rx
+    tol = (0.02 if explicit_cpgimp else 0.005) if sim.shape == "cpgimp" else 0.06
     assert abs(sxx / -S0 - 1) < tol, sxx
     assert abs(syy / ref - 1) < tol, (syy, ref)
 

@@ -28,18 +28,19 @@ def choose_shape(sim):
     0.6 %) against 116 % / 133 % (rms 12.5 % / 15.8 %). The standard
     family where a wide one is not available or measured worse: implicit integrators with a
     plastic material or on meshes that are not lattices, force_integration="mixed",
-    plastic materials other than VonMises (`plastic` set: MohrCoulomb, Hypoplastic). For
-    Mohr-Coulomb cpGIMP is closer on the failure problems (2026-12-06): the L4 slope
-    (demos/slope_failure.py, 50 x 27 cells) fails between strength-reduction factors 0.625
-    and 0.65 with cpGIMP (0.6-0.625 on 100 x 54) against Bishop's 0.598
-    (problems.slope_stability), the standard family's crest creeps past the criterion from
-    0.555-0.578 on (0.5 on 100 x 54); the granular collapse meets Lube et al.'s laws at every
-    aspect ratio with cpGIMP only. But with cpGIMP the softening slope
-    (problems.softening_slope) threw dilated particles out through its rough base at H/32
-    (regularised) and H/64 (local) until a cpGIMP box stopped at the grid boundary
-    (shapes.gimp, 2026-12-06); Mohr-Coulomb keeps the standard family until the slope's
-    series and the other Mohr-Coulomb figures are re-measured with cpGIMP
-    (docs/guide/choosing.md). VonMises gets cpGIMP on
+    plastic materials other than VonMises and MohrCoulomb (`plastic` set: Hypoplastic; its
+    pile demo not measured with cpGIMP). VonMises and MohrCoulomb get cpGIMP on a lattice.
+    Mohr-Coulomb (2026-12-06): the L4 slope (demos/slope_failure.py, 50 x 27 cells) fails
+    between strength-reduction factors 0.625 and 0.65 with cpGIMP (0.6-0.625 on 100 x 54)
+    against Bishop's 0.598 (problems.slope_stability), while the standard family's slope
+    creeps past the failure criterion from 0.555-0.578 on (0.5 on 100 x 54), moving away
+    from it; the granular collapse meets Lube et al.'s laws at every aspect ratio with
+    cpGIMP only (a = 4 height -9.1 % against -17.4 %, docs/guide/choosing.md); the weightless
+    footing against c N_c at 2 / 5 / 10 cells under B/2 is 1.063 / 1.096 / 1.054 (phi 20)
+    and 0.829 / 1.021 / 1.015 (phi 30) against 1.031 / 1.039 / 1.004 and 0.963 / 0.948 /
+    0.945 standard (bench bearing-capacity); the softening slope (problems.softening_slope)
+    runs to rest at H/8-H/64 since a cpGIMP box stops at the grid boundary (shapes.gimp),
+    its two finest run-outs 7.1 % apart regularised (standard 7.7 %). VonMises gets cpGIMP on
     a lattice (with F-bar, Simulation fbar="auto"): Prandtl's smooth footing (bench
     bearing-capacity) 1.165 / 1.031 / 1.022 (2+pi) c_u at 2 / 5 / 10 cells under B/2 against
     1.065 / 0.994 / 0.852 standard; elsewhere the standard family. Implicit runs of elastic
@@ -59,9 +60,9 @@ def choose_shape(sim):
     if implicit and plastic:
         return "mpm", (f"implicit integrator with a plastic material ({', '.join(plastic)}): "
                        f"Newton diverged earlier with cpGIMP on the footing scenes")
-    if set(plastic) - {"VonMises"}:
-        return "mpm", (f"plastic material ({', '.join(plastic)}): cpGIMP not yet re-measured "
-                       f"on the softening slope since its boxes stop at the grid boundary")
+    if set(plastic) - {"VonMises", "MohrCoulomb"}:
+        return "mpm", (f"plastic material ({', '.join(plastic)}): not measured with the wide "
+                       f"families")
     try:
         lat = lattice(grid)
         if implicit and _coarse_fill(sim, lat):
@@ -69,13 +70,16 @@ def choose_shape(sim):
                            "direction (cpGIMP measured implicitly with 2 x 2 per cell)")
         return "cpgimp", "structured axis-aligned grid" + (
             " (von Mises: Prandtl's footing 1.022 (2+pi) c_u with F-bar at 10 cells under B/2, "
-            "standard 0.852)" if plastic else "")
+            "standard 0.852)" if "VonMises" in plastic else "") + (
+            " (Mohr-Coulomb: the L4 slope fails at 0.625-0.65 against Bishop's 0.598, "
+            "standard 0.555-0.578 and moving away under refinement)" if "MohrCoulomb" in plastic else "")
     except ValueError:
         pass
     if implicit:
         return "mpm", "implicit integrator on a mesh that is not a structured lattice (wide families not measured there)"
     if plastic:
-        return "mpm", "von Mises material on a mesh that is not a structured lattice (wide families not measured there)"
+        return "mpm", (f"plastic material ({', '.join(plastic)}) on a mesh that is not a "
+                       f"structured lattice (wide families not measured there)")
     if grid.axisymmetric:
         return "mpm", "axisymmetric grid that is not a structured lattice"
     if grid.gdim == 2:
