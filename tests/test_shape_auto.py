@@ -42,19 +42,15 @@ def test_auto_falls_back_with_a_reason():
     sim.set_periodic(0)
     assert sim.shape == "mpm" and "periodic" in sim.shape_reason
     mc = fm.MohrCoulomb(E=1e6, nu=0.3, density=1e3, phi=30.0, c=1e3)
-    sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), material=mc)
-    assert sim.shape == "cpgimp" and "Bishop" in sim.shape_reason, sim.shape_reason
-    sim = _sim(mesh.CellType.triangle, fm.Explicit(), material=mc)
-    assert sim.shape == "mpm" and "MohrCoulomb" in sim.shape_reason, sim.shape_reason
-    sim = _sim(mesh.CellType.quadrilateral, fm.QuasiStatic(), material=mc)
-    assert sim.shape == "mpm" and "implicit" in sim.shape_reason, sim.shape_reason
     vm = fm.VonMises(E=1e6, nu=0.3, density=1e3, c_u=1e3)
-    sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(), material=vm)
-    assert sim.shape == "cpgimp" and "Prandtl" in sim.shape_reason, sim.shape_reason
-    sim = _sim(mesh.CellType.triangle, fm.Explicit(), material=vm)
-    assert sim.shape == "mpm" and "VonMises" in sim.shape_reason, sim.shape_reason
-    sim = _sim(mesh.CellType.quadrilateral, fm.QuasiStatic(), material=vm)
-    assert sim.shape == "mpm" and "implicit" in sim.shape_reason, sim.shape_reason
+    for material, why in ((mc, "Bishop"), (vm, "Prandtl")):
+        name = type(material).__name__
+        for cell, integrator, shape, reason in (
+                (mesh.CellType.quadrilateral, fm.Explicit(), "cpgimp", why),
+                (mesh.CellType.triangle, fm.Explicit(), "mpm", name),
+                (mesh.CellType.quadrilateral, fm.QuasiStatic(), "mpm", "implicit")):
+            sim = _sim(cell, integrator, material=material)
+            assert sim.shape == shape and reason in sim.shape_reason, (name, sim.shape_reason)
     sim = _sim(mesh.CellType.quadrilateral, fm.Explicit(),
                material=fm.NeoHookean(E=1e6, nu=0.3, density=1e3))
     assert sim.shape == "cpgimp"

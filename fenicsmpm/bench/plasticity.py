@@ -12,7 +12,8 @@ Scenes (Mohr-Coulomb, psi = 0, plane strain, 3 x 3 particles per cell, quadrilat
              demos/slope_failure.py: 200 m x 108 m, base layer 40 m, slope 60 m high at 1V:1.5H,
              toe at x = 50 m. Full: 50 x 27 cells, to t = 12 s; quick: 20 x 11 cells, to t = 8 s.
 Runs per scene:
-  explicit   fm.Explicit("MUSL"), dt = 0.5 h / c_p (collapse: the seed's 1 ms at full size,
+  explicit   fm.Explicit("MUSL") with shape="auto" (cpGIMP on this grid for Mohr-Coulomb
+             since 2026-12-06; the standard family before), dt = 0.5 h / c_p (collapse: the seed's 1 ms at full size,
              2 ms quick). The collapse base is frictional: sim.add_friction(mu = 0.6).
   implicit   fm.Newmark() (beta = 1/4, gamma = 1/2, Newton with the consistent Mohr-Coulomb
              tangent, rtol 1e-6, direct LU), dt = DT_FACTOR = 10 x the explicit dt, max_dt_cuts
@@ -160,7 +161,7 @@ def run_scene(scene, kind, size, comm, t_end=None):
     if crest_u is not None:
         metrics["crest_u"] = crest_u
     config = dict(integrator="Explicit" if explicit else "Newmark",
-                  scheme="MUSL" if explicit else "Newmark", shape="mpm", h=h, dt=dt, ppc=3,
+                  scheme="MUSL" if explicit else "Newmark", shape=sim.shape, h=h, dt=dt, ppc=3,
                   cell_type="quadrilateral", scene=scene, t_end=t_end,
                   base=("frictional mu=0.6" if explicit else "fixed (no slip)")
                   if scene == "collapse" else "rollers")
