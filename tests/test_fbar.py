@@ -51,8 +51,11 @@ def test_prandtl_footing_with_and_without_fbar(tmp_path_factory):
     # phi = 30 deg mechanism (4.3 m long, a cell deep near the surface) is under-resolved
     # and its plateau decays after the peak (1.12 at 1 s): asserted within 20 % here,
     # within 5 % at 10 cells in the bench.
+    # The standard family keeps its bound of before (0.963 measured): the mc30 row's wider
+    # one is for cpGIMP, a different method at this size, not a loosened check of the same.
     assert abs(q["h0.25-mc20"] - 1.0) < 0.1, q
     assert abs(q["h0.25-mc30"] - 1.0) < 0.2, q
+    assert abs(q["h0.25-mc30-mpm"] - 1.0) < 0.1, q
     # the implicit particle footing, 30 mm in 60 steps, its edge at a cell centre (2.5 cells
     # under B/2): 1.010 (nu 0.49) / 0.989 (nu 0.3) / 1.019 (rough) (0.996 / 0.973 / 1.007 at
     # 10.5 cells, docs/guide/choosing.md; with the edge on a grid line 1.261 / 1.224 / 1.273)
