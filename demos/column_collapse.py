@@ -21,8 +21,9 @@ peaked, until the runout grows by less than STOP_RUNOUT = 1 mm in a chunk, or t_
 (--quick: t_max = 2 s). The seed: "the time of the collapse is t = 2.5 s". The mean speed
 falls to 0.003 m/s (0.1 % of the 2.73 m/s peak, at h = 0.4 m, with the defaults since
 2026-12-06: cpGIMP, run-out 5.22 m, stopped at 2.6 s; 0.022 m/s with the standard family and
-Mohr-Coulomb's separation gap before) once the runout has stopped; with pure FLIP (before fm.Explicit's plastic default flip = 0.99) the deposit kept 0.14 m/s of
-particle-velocity noise at the rough base.
+Mohr-Coulomb's separation gap before) once the runout has stopped; with pure FLIP (before
+fm.Explicit's plastic default flip = 0.99) the deposit kept 0.14 m/s of particle-velocity
+noise at the rough base.
 Printed and returned:
   runout         the final spread of the deposit, (max x_p - min x_p - W) / 2, from the
                  particle centres (the advance of each toe beyond the initial column edge,

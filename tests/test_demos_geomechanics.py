@@ -13,8 +13,8 @@ Assertions and their reasons:
     fails (the seed's slide; Bishop's simplified method gives F = 0.598 < 1, reported by the
     demo, within 0.5 % of that), the bisection bracket is valid (stable at its lower end,
     failed at its upper end), lies in (0, 1], is 0.25 wide and holds Bishop's factor
-    (measured (0.5, 0.75], with the standard family and with cpGIMP); the failed runs moved the crest by more
-    than the stable ones.
+    (measured (0.5, 0.75], with the standard family and with cpGIMP); the failed runs moved
+    the crest by more than the stable ones.
   strip footing (W5, dx = 0.25 m, first pulse, fixed and viscous bases): the geostatic
     sigma_yy of the bottom particle row matches -rho g d within 2 % and the surface settles
     by the 1D elastic closed form rho g (H y0 - y0^2/2) / M within 1 % (the quasi-static

@@ -81,8 +81,8 @@ def test_bad_input_names_the_problem():
 
 
 def test_a_family_that_ignores_the_edge_domains_warns():
-    """Mohr-Coulomb on triangles gets the standard family from shape="auto" (docs/guide/choosing.md),
-    which would see 1.5 points a cell: the user is told."""
+    """Mohr-Coulomb on triangles gets the standard family from shape="auto"
+    (docs/guide/choosing.md), which would see 1.5 points a cell: the user is told."""
     g = _grid(4, 2)
     soil = fm.MohrCoulomb(E=1e7, nu=0.3, density=1800.0, phi=30.0, c=0.0)
     ctx = (pytest.warns(RuntimeWarning, match="fill_edges carry quadrilateral CPDI2 domains")

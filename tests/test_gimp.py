@@ -178,7 +178,8 @@ def test_a_cpgimp_box_stops_at_the_grid_boundary():
     got = (sim.N * field[sim.nodes]).sum(axis=1)
     A = np.array([[0.3, -0.2], [0.5, 0.1]])
     u = grid.node_x @ A.T
-    affine = np.abs(np.einsum("pa,paj->pj", sim.N, u[sim.nodes]) - pts.x @ A.T).max() if len(pts) else 0.0
+    affine = (np.abs(np.einsum("pa,paj->pj", sim.N, u[sim.nodes]) - pts.x @ A.T).max()
+              if len(pts) else 0.0)
     err = np.abs(got[low] - eps[low] / L[1]).max() if low.any() else 0.0
     comm = MPI.COMM_WORLD
     assert comm.allreduce(max(err, affine), op=MPI.MAX) < 1e-12, (err, affine)

@@ -13,8 +13,8 @@ Scenes (Mohr-Coulomb, psi = 0, plane strain, 3 x 3 particles per cell, quadrilat
              toe at x = 50 m. Full: 50 x 27 cells, to t = 12 s; quick: 20 x 11 cells, to t = 8 s.
 Runs per scene:
   explicit   fm.Explicit("MUSL") with shape="auto" (cpGIMP on this grid for Mohr-Coulomb
-             since 2026-12-06; the standard family before), dt = 0.5 h / c_p (collapse: the seed's 1 ms at full size,
-             2 ms quick). The collapse base is frictional: sim.add_friction(mu = 0.6).
+             since 2026-12-06; the standard family before), dt = 0.5 h / c_p (collapse:
+             the seed's 1 ms at full size, 2 ms quick). The collapse base is frictional: sim.add_friction(mu = 0.6).
   implicit   fm.Newmark() (beta = 1/4, gamma = 1/2, Newton with the consistent Mohr-Coulomb
              tangent, rtol 1e-6, direct LU), dt = DT_FACTOR = 10 x the explicit dt, max_dt_cuts
              = 4 (a step whose Newton fails is retried as halves). Frictional bases are
