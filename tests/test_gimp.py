@@ -125,7 +125,8 @@ def _dense(nodes, W, grid):
 
 
 def test_a_cpgimp_box_stretches_to_one_cell_each_side_and_no_further(rng):
-    """A cpGIMP box follows F_kk up to a half-width of one cell (gimp.half_width): stretched
+    """A cpGIMP box follows F_kk up to a half-width of one cell (gimp.half_width, and to the
+    particle's distance to the grid boundary): stretched
     20x along x (l_p^0 = L / 4, so 5 L uncapped) a particle's weights equal uGIMP's for the
     half-width L exactly, at most 4 nodes per axis; partition of unity and the affine
     reproduction stay exact (1e-12). On any partition the box then reaches only the cells next
@@ -137,8 +138,11 @@ def test_a_cpgimp_box_stretches_to_one_cell_each_side_and_no_further(rng):
     pts.F[:, 0, 0] = 20.0
     sim.locate_and_shape()
     N, dN, nodes = sim.N.copy(), sim.dN.copy(), sim.nodes.copy()
-    half = kg.half_widths(pts.gimp_l0, pts.F, L, True)
-    assert np.allclose(half[:, 0], L[0]) and np.allclose(half[:, 1], L[1] / 4)
+    lat = sim._wide.lat
+    half = kg.half_widths(pts.gimp_l0, pts.F, pts.x, L, lat["lo"], lat["hi"], True)
+    wall = np.minimum(pts.x - lat["lo"], lat["hi"] - pts.x)     # the box stops at the boundary
+    assert np.allclose(half[:, 0], np.minimum(L[0], wall[:, 0]))
+    assert np.allclose(half[:, 1], L[1] / 4)
     A, b = rng.normal(size=(2, 2)), rng.normal(size=2)
     u = grid.node_x @ A.T + b
     pu = np.abs(N.sum(axis=1) - 1).max() if len(pts) else 0.0

@@ -183,8 +183,10 @@ class _DoubleMapping:
             self._omp = nmp
         omp = self._omp[p.cell]
         self._corr = np.where(omp > 0, omp / np.maximum(nmp[p.cell], 1), 1.0)
-        self._lbox = half_widths(p.gimp_l0, p.F, sim._wide.lat["spacing"], sim.shape == "cpgimp")
-        rmax = float((self._lbox / sim._wide.lat["spacing"]).max()) if len(p) else 0.5
+        lat = sim._wide.lat
+        self._lbox = half_widths(p.gimp_l0, p.F, p.x, lat["spacing"], lat["lo"], lat["hi"],
+                                 sim.shape == "cpgimp")
+        rmax = float((self._lbox / lat["spacing"]).max()) if len(p) else 0.5
         self._nmax = int(np.ceil(2.0 * rmax)) + 1
         self._cmpm = self.basis.evaluate(p.x, p.cell, self.basis.material(nmp))
         sim.timers["shape"] += time.perf_counter() - t0

@@ -424,7 +424,8 @@ def _family_rings(sim, shape):
     if shape in ("ugimp", "cpgimp"):
         from ..shapes.gimp import max_half_width
         p, lat = sim.particles, sim._wide.lat
-        rmax = max_half_width(p.gimp_l0, p.F, lat["spacing"], shape == "cpgimp") if len(p) else 0.0
+        rmax = (max_half_width(p.gimp_l0, p.F, p.x, lat["spacing"], lat["lo"], lat["hi"],
+                               shape == "cpgimp") if len(p) else 0.0)
         if sim.comm.size > 1:
             from mpi4py import MPI
             rmax = sim.comm.allreduce(rmax, op=MPI.MAX)

@@ -22,6 +22,9 @@ takes from the grid vanishes at a held wall as with the standard family. Cutting
 the boundary instead (before; uGIMP boxes still are) left a particle at the wall with about
 half the velocity of the node row above it: stretched particles of the softening slope
 (problems.softening_slope, cpGIMP, H/32 and H/64) were carried out through its rough base.
+The cap lives in `half_width`, which every user of the box shares: the shape evaluation, the
+implicit stiffness pattern (max_half_width) and DM-GC's cell integrals
+(integrators.dmgc, half_widths).
 
 uGIMP keeps l_p = l_p^0; cpGIMP (contiguous particle GIMP, Wallstedt & Guilkey 2008) uses
 l_p,k = min(l_p,k^0 |F_kk|, L_k) (the box follows the stretch along each axis, up to one cell
@@ -93,20 +96,24 @@ def _closed_weight(dd, L, lp, inv_L, inv_Ll):
 
 
 @njit(cache=True)
-def half_width(lp0, Fkk, L, contiguous):
-    """The box half-width along one axis: min(lp0 |F_kk|, L) for cpGIMP (contiguous), lp0 for
-    uGIMP (module docstring)."""
-    return min(lp0 * abs(Fkk), L) if contiguous else lp0
+def half_width(lp0, Fkk, L, contiguous, xk, lo, hi):
+    """The box half-width along one axis at the particle coordinate xk on a grid [lo, hi]:
+    lp0 for uGIMP; for cpGIMP (contiguous) min(lp0 |F_kk|, L), and the box stops at the grid
+    boundary, min(., xk - lo, hi - xk), floored at 1e-9 L (module docstring)."""
+    if not contiguous:
+        return lp0
+    return max(min(lp0 * abs(Fkk), L, xk - lo, hi - xk), 1e-9 * L)
 
 
 @njit(cache=True)
-def half_widths(lp0, F, spacing, contiguous):
+def half_widths(lp0, F, x, spacing, lo, hi, contiguous):
     """(n, d) box half-widths of every particle (half_width per axis)."""
     n, d = lp0.shape
     out = np.empty((n, d))
     for p in range(n):
         for k in range(d):
-            out[p, k] = half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous)
+            out[p, k] = half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous, x[p, k],
+                                   lo[k], hi[k])
     return out
 
 
@@ -178,9 +185,7 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
         stride = 1
         for k in range(d):
             L = spacing[k]
-            lp = half_width(lp0[p, k], F[p, k, k], L, contiguous)
-            if contiguous:      # cpGIMP: the box stops at the grid boundary (docstring)
-                lp = max(min(lp, x[p, k] - lo[k], hi[k] - x[p, k]), 1e-9 * L)
+            lp = half_width(lp0[p, k], F[p, k, k], L, contiguous, x[p, k], lo[k], hi[k])
             a = max(x[p, k] - lp, lo[k])
             b = min(x[p, k] + lp, hi[k])
             j0 = int(np.floor((a - origin[k]) / L))     # the last node at or below a ...
@@ -210,12 +215,13 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
 
 
 @njit(cache=True)
-def max_half_width(lp0, F, spacing, contiguous):
+def max_half_width(lp0, F, x, spacing, lo, hi, contiguous):
     """max over particles and axes of l_pk / L_k (l_pk = half_width)."""
     r = 0.0
     for p in range(lp0.shape[0]):
         for k in range(lp0.shape[1]):
-            r = max(r, half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous) / spacing[k])
+            r = max(r, half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous, x[p, k],
+                                  lo[k], hi[k]) / spacing[k])
     return r
 
 
