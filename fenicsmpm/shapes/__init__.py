@@ -27,7 +27,10 @@ def choose_shape(sim):
     73 % / 92 %; the default 2 per cell (8 sub-tetrahedra), CPDI1 3.5 % / 1.8 % (rms 1.5 % /
     0.6 %) against 116 % / 133 % (rms 12.5 % / 15.8 %). The standard
     family where a wide one is not available or measured worse: implicit integrators with a
-    plastic material or on meshes that are not lattices, force_integration="mixed",
+    plastic material (W5 softening footing at h = 0.125 / 0.0625 / 0.03125 m: curves 7.2 %
+    apart with cpGIMP against 9.5 % standard at 3.0-5.8x the time; implicit Prandtl footing,
+    rough: Newton stalls at |R|/|f| ~ 1e-6 with cpGIMP; 2026-12-06, docs/guide/choosing.md)
+    or on meshes that are not lattices, force_integration="mixed",
     plastic materials other than VonMises and MohrCoulomb (`plastic` set: Hypoplastic; its
     pile demo not measured with cpGIMP). VonMises and MohrCoulomb get cpGIMP on a lattice.
     Mohr-Coulomb (2026-12-06): the L4 slope (demos/slope_failure.py, 50 x 27 cells) fails
@@ -59,7 +62,8 @@ def choose_shape(sim):
     implicit = not sim.integrator.explicit
     if implicit and plastic:
         return "mpm", (f"implicit integrator with a plastic material ({', '.join(plastic)}): "
-                       f"Newton diverged earlier with cpGIMP on the footing scenes")
+                       f"with cpGIMP Newton stalls under the rough implicit footing, and the "
+                       f"W5 footing costs 3-6x for curves 7.2 % instead of 9.5 % apart")
     if set(plastic) - {"VonMises", "MohrCoulomb"}:
         return "mpm", (f"plastic material ({', '.join(plastic)}): not measured with the wide "
                        f"families")
