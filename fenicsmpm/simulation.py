@@ -4,6 +4,7 @@ Stages (DESIGN.md): locate -> shape -> P2G -> grid solve (the integrator) -> G2P
 constitutive update. The integrator decides the order; the stage functions live here. The set-up
 API (fix, add_traction, add_boundary, start_stage, probe, ...) is inherited from
 setup.SetupMixin, the energy monitor from energy.EnergyMixin; Probe and Output live in io/."""
+import logging
 import math
 import time
 import warnings
@@ -50,7 +51,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
     reported as a warning) or "periodic" (re-enter through the opposite periodic face, see
     set_periodic; particles leaving elsewhere stop the run as with "error").
     max_dt_cuts: implicit runs only: when Newton or the KSP fails, retry the step as two
-    half steps, at most this many halvings deep (each retry is logged as a warning).
+    half steps, at most this many halvings deep (one warning a step that needed cuts, with
+    the first failure, the number of cuts and the smallest dt; each cut is logged at INFO on
+    the "fenicsmpm" logger).
     gravity_ramp: None, or a time T: gravity grows smoothly over the first T/2 of the stage,
     g(t) = g [sin(2 pi t / T - pi / 2) + 1] / 2 (seed 002 eq 4.13), then stays at g.
     stress_feedback: None, or "smoothed": explicit runs compute the internal force from the
@@ -484,14 +487,24 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             err.state_intact = isinstance(err, ParticlesLeftMesh) or not self.integrator.explicit
             if self.integrator.explicit or cuts_left == 0 or isinstance(err, ParticlesLeftMesh):
                 raise
+            self._cuts.append((dt / 2, str(err)))
             if self.comm.rank == 0:
-                warnings.warn(f"{err}; retrying with two steps of dt = {dt / 2:.6g}", stacklevel=3)
+                logging.getLogger("fenicsmpm").info("%s; retrying with two steps of dt = %.6g",
+                                                    err, dt / 2)
             self._advance(dt / 2, cuts_left - 1)
             self._advance(dt / 2, cuts_left - 1)
             return
         if self._wide is not None:
             self._wide.after_step(self, dt)
         self.t += dt
+
+    def _cuts_summary(self):
+        """The one warning of a step that was cut (_advance): the first failure, the number of
+        cuts and the smallest dt tried."""
+        small = min(d for d, _ in self._cuts)
+        return (f"{self._cuts[0][1]}; the step was retried in smaller steps: {len(self._cuts)} "
+                f"cut(s), down to dt = {small:.6g} ({self.dt / small:.0f}x smaller; every "
+                f"cut is logged at INFO on the 'fenicsmpm' logger)")
 
     def follow_state_dt(self):
         """dt="auto" (explicit): the step of the current state, cfl * stability_factor * h /
@@ -511,7 +524,12 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         state, follow_state_dt)."""
         if self._dt_auto and self.integrator.explicit:
             self.follow_state_dt()
-        self._advance(self.dt, self.max_dt_cuts)
+        self._cuts = []
+        try:
+            self._advance(self.dt, self.max_dt_cuts)
+        finally:
+            if self._cuts and self.comm.rank == 0:
+                warnings.warn(self._cuts_summary(), stacklevel=2)
         self.step_count += 1
         t0 = time.perf_counter()
         check_particles(self)

@@ -339,9 +339,12 @@ def test_dt_cuts_retry_and_final_failure_writes_last_state(shared_tmp_path):
     dt = sim.dt
     integ = _FailsAboveDt(max_dt=0.3 * dt)
     sim = fm.Simulation(sim.grid, sim.particles, integ, dt=dt, max_dt_cuts=2)
-    with pytest.warns(UserWarning, match="retrying with two steps") if WORLD.rank == 0 else _nothing():
+    with pytest.warns(UserWarning, match="retried in smaller steps") if WORLD.rank == 0 else _nothing() as w:
         sim.step()
     assert np.allclose(integ.dts, [dt / 4] * 4) and sim.step_count == 1
+    if WORLD.rank == 0:     # one warning for the step: 3 cuts (dt/2, then dt/4 twice)
+        msgs = [str(x.message) for x in w if "smaller steps" in str(x.message)]
+        assert len(msgs) == 1 and "3 cut(s), down to dt" in msgs[0] and "4x smaller" in msgs[0], msgs
     assert np.isclose(sim.t, dt, rtol=1e-15)
     # one cut is not enough: the error propagates and the last accepted state is written
     path = os.path.join(shared_tmp_path, "ck")
