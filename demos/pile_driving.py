@@ -72,9 +72,9 @@ Re-run 2026-12-06 (`--h H --blows 1 [--shape cpgimp]`, serial): standard family 
 default for hypoplastic sand) -0.006 / 0.662 m at h = 0.3 / 0.15 m (18 / 114 s wall), cpGIMP
 -0.014 / 0.815 m (19 / 141 s); --quick 0.627 / 0.400 m standard, 0.562 / 0.350 m cpGIMP
 (21 / 20 s).
-NOT converged: the two finest sizes differ by far more than 5 %, with either family. With the pile a quarter,
-half or one cell wide the contact is not resolved; h = 0.075 m (4x the particles, 2x the
-steps: ~40 min CPU a blow here) was not run.
+NOT converged: the two finest sizes differ by far more than 5 %, with either family. With the
+pile a quarter, half or one cell wide the contact is not resolved; h = 0.075 m (4x the
+particles, 2x the steps: ~40 min CPU a blow here) was not run.
 The gap check lets a body one cell wide creep into the soil (an elastic rod on a block sinks
 0.08 m in 0.2 s, tests/test_contact.py), so the default is the seed's plain detection, which
 contacts one cell early and over-resists (as the seed says of its frictional MPM contact).
@@ -301,8 +301,8 @@ def main(argv=None):
     pile_r = particle_raster(comm, p.x[~on_soil], None, bounds, shape, reduce="count")
     if comm.rank != 0:
         return res
-    print(f"pile driving (h = {h:g} m, {res['n_particles']} particles, shape {sim.shape}, {start} start, "
-          f"{sim.step_count} steps of {sim.dt:.3g} s, {wall:.0f} s wall)")
+    print(f"pile driving (h = {h:g} m, {res['n_particles']} particles, shape {sim.shape}, "
+          f"{start} start, {sim.step_count} steps of {sim.dt:.3g} s, {wall:.0f} s wall)")
     print(f"{'quantity':44s} {'here':>12s} {'seed 004':>12s}")
     print(f"{'pile-head settlement after gravity [m]':44s} {settle_head:12.3f} {'0.25':>12s}")
     print(f"{'pile-tip settlement after gravity [m]':44s} {settle_tip:12.3f} {'':>12s}")

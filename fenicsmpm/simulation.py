@@ -474,9 +474,10 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         if checkpoint is not None:
             self.checkpoint(checkpoint)
 
-    def _advance(self, dt, cuts_left):
+    def _advance(self, dt, cuts_left, cuts):
         """integrator.step over dt; on a Newton/KSP failure of an implicit integrator (raised
-        before any state changed) retry as two steps of dt/2, at most `cuts_left` deep. The
+        before any state changed) retry as two steps of dt/2, at most `cuts_left` deep, each
+        cut appended to `cuts` as (dt/2, error) for step's one warning. The
         nonlocal softening variables are first computed from the committed state
         (materials.regularisation)."""
         regularise(self, dt)
@@ -487,22 +488,22 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             err.state_intact = isinstance(err, ParticlesLeftMesh) or not self.integrator.explicit
             if self.integrator.explicit or cuts_left == 0 or isinstance(err, ParticlesLeftMesh):
                 raise
-            self._cuts.append((dt / 2, str(err)))
+            cuts.append((dt / 2, str(err)))
             if self.comm.rank == 0:
                 logging.getLogger("fenicsmpm").info("%s; retrying with two steps of dt = %.6g",
                                                     err, dt / 2)
-            self._advance(dt / 2, cuts_left - 1)
-            self._advance(dt / 2, cuts_left - 1)
+            self._advance(dt / 2, cuts_left - 1, cuts)
+            self._advance(dt / 2, cuts_left - 1, cuts)
             return
         if self._wide is not None:
             self._wide.after_step(self, dt)
         self.t += dt
 
-    def _cuts_summary(self):
-        """The one warning of a step that was cut (_advance): the first failure, the number of
-        cuts and the smallest dt tried."""
-        small = min(d for d, _ in self._cuts)
-        return (f"{self._cuts[0][1]}; the step was retried in smaller steps: {len(self._cuts)} "
+    def _cuts_summary(self, cuts):
+        """The one warning of a step that was cut (_advance's `cuts`: (dt, error) per cut): the
+        first failure, the number of cuts and the smallest dt tried."""
+        small = min(d for d, _ in cuts)
+        return (f"{cuts[0][1]}; the step was retried in smaller steps: {len(cuts)} "
                 f"cut(s), down to dt = {small:.6g} ({self.dt / small:.0f}x smaller; every "
                 f"cut is logged at INFO on the 'fenicsmpm' logger)")
 
@@ -524,12 +525,12 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         state, follow_state_dt)."""
         if self._dt_auto and self.integrator.explicit:
             self.follow_state_dt()
-        self._cuts = []
+        cuts = []
         try:
-            self._advance(self.dt, self.max_dt_cuts)
+            self._advance(self.dt, self.max_dt_cuts, cuts)
         finally:
-            if self._cuts and self.comm.rank == 0:
-                warnings.warn(self._cuts_summary(), stacklevel=2)
+            if cuts and self.comm.rank == 0:
+                warnings.warn(self._cuts_summary(cuts), stacklevel=2)
         self.step_count += 1
         t0 = time.perf_counter()
         check_particles(self)

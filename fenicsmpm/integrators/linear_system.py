@@ -422,10 +422,11 @@ def stencil_rings(sim):
 def _family_rings(sim, shape):
     """stencil_rings of a wide family without F-bar."""
     if shape in ("ugimp", "cpgimp"):
-        from ..shapes.gimp import max_half_width
+        from ..shapes.gimp import half_widths
         p, lat = sim.particles, sim._wide.lat
-        rmax = (max_half_width(p.gimp_l0, p.F, p.x, lat["spacing"], lat["lo"], lat["hi"],
-                               shape == "cpgimp") if len(p) else 0.0)
+        rmax = (float((half_widths(p.gimp_l0, p.F, p.x, lat["spacing"], lat["lo"], lat["hi"],
+                                   shape == "cpgimp") / lat["spacing"]).max())
+                if len(p) else 0.0)
         if sim.comm.size > 1:
             from mpi4py import MPI
             rmax = sim.comm.allreduce(rmax, op=MPI.MAX)

@@ -23,7 +23,7 @@ the boundary instead (before; uGIMP boxes still are) left a particle at the wall
 half the velocity of the node row above it: stretched particles of the softening slope
 (problems.softening_slope, cpGIMP, H/32 and H/64) were carried out through its rough base.
 The cap lives in `half_width`, which every user of the box shares: the shape evaluation, the
-implicit stiffness pattern (max_half_width) and DM-GC's cell integrals
+implicit stiffness pattern (half_widths) and DM-GC's cell integrals
 (integrators.dmgc, half_widths).
 
 uGIMP keeps l_p = l_p^0; cpGIMP (contiguous particle GIMP, Wallstedt & Guilkey 2008) uses
@@ -212,17 +212,6 @@ def _gimp(D, x, lp0, F, contiguous, origin, spacing, lo, hi, ilo, nlat, table, n
                           nodes_out, N_out, dN_out, count_out):
             bad = p
     return bad
-
-
-@njit(cache=True)
-def max_half_width(lp0, F, x, spacing, lo, hi, contiguous):
-    """max over particles and axes of l_pk / L_k (l_pk = half_width)."""
-    r = 0.0
-    for p in range(lp0.shape[0]):
-        for k in range(lp0.shape[1]):
-            r = max(r, half_width(lp0[p, k], F[p, k, k], spacing[k], contiguous, x[p, k],
-                                  lo[k], hi[k]) / spacing[k])
-    return r
 
 
 @njit(parallel=PRANGE, cache=True)
