@@ -210,6 +210,14 @@ def test_explicit_no_softening_unchanged_and_softening_regularised():
     assert sim.timers["nonlocal"] > 0.0
 
 
+def _brute_average(x, vol, kap, l, n_own):
+    """The O(n^2) <kappa> of nonlocal_average's docstring for the first n_own points."""
+    r = np.linalg.norm(x[:n_own, None, :] - x[None, :, :], axis=2)
+    w = np.where(r < 3 * l, r / l ** 2 * np.exp(-(r / l) ** 2), 0.0) * vol[None, :]
+    den = w.sum(axis=1)
+    return np.where(den > 0, (w @ kap) / np.where(den > 0, den, 1), kap[:n_own])
+
+
 def test_nonlocal_average_kernel_against_brute_force():
     """Binned search (kernel) against the O(n^2) sum on random points, ghosts included."""
     rng = np.random.default_rng(3)
@@ -219,11 +227,24 @@ def test_nonlocal_average_kernel_against_brute_force():
     l, n_own = 0.07, 300
     out = np.empty(n_own)
     nonlocal_average(x, vol, kap, n_own, np.zeros(2), 0.05, l, out)
-    r = np.linalg.norm(x[:n_own, None, :] - x[None, :, :], axis=2)
-    w = np.where(r < 3 * l, r / l ** 2 * np.exp(-(r / l) ** 2), 0.0) * vol[None, :]
-    den = w.sum(axis=1)
-    ref = np.where(den > 0, (w @ kap) / np.where(den > 0, den, 1), kap[:n_own])
-    assert np.allclose(out, ref, rtol=1e-12, atol=1e-15)
+    assert np.allclose(out, _brute_average(x, vol, kap, l, n_own), rtol=1e-12, atol=1e-15)
+
+
+def test_nonlocal_average_of_a_small_plastic_zone_against_brute_force():
+    """Only points near kappa != 0 are scanned (the hot bins dilated by the cutoff): with the
+    plastic zone in one corner the far points get exactly 0 and the near ones the O(n^2)
+    average, also where the zone lies within a bin or two of the cutoff."""
+    rng = np.random.default_rng(5)
+    x = rng.uniform(0.0, 1.0, (1500, 2))
+    vol = rng.uniform(0.5, 1.5, 1500)
+    kap = np.where(np.linalg.norm(x, axis=1) < 0.08, rng.uniform(0.01, 0.1, 1500), 0.0)
+    l, n_own = 0.07, 1400
+    out = np.full(n_own, np.nan)
+    nonlocal_average(x, vol, kap, n_own, np.zeros(2), 0.05, l, out)
+    assert np.allclose(out, _brute_average(x, vol, kap, l, n_own), rtol=1e-12, atol=1e-15)
+    far = np.linalg.norm(x[:n_own], axis=1) > 0.08 + 3 * l
+    assert far.sum() > 1000 and np.all(out[far] == 0.0)
+    assert np.count_nonzero(out) > 50
 
 
 def test_parameters_are_checked():

@@ -54,9 +54,12 @@ smallest cell size) anchored at the mesh's lower corner, so on structured grids 
 the grid's cells; a point scans the bins that meet the disc (sphere) of radius 3 l around it
 (row by row: about pi/4 (pi/6) of the square (cube) of ceil(3 l / h) rings), reading the
 points from copies sorted by bin, so the bins of one row are one contiguous run; O(n k) for
-k neighbours; it gets <kappa> = 0 when no point with kappa != 0 lies in those bins. The
-points are averaged in parallel chunks of RETURN_CHUNK (kernels.threads), the same bits on
-any number of threads.  Under
+k neighbours; it gets <kappa> = 0 when no point with kappa != 0 lies in those bins, and a
+point whose bin is more than the cutoff (plus a bin) from every such bin is not scanned at
+all (the bins holding kappa != 0 dilated by the cutoff). The scanned points are averaged in
+parallel chunks that each take every nc-th of them (kernels.threads' RETURN_CHUNK sets nc),
+so a plastic zone that is one block of the particle order still spreads over the threads;
+the same bits on any number of threads.  Under
 MPI every rank receives the particles of the other ranks within 3 l of its particles'
 bounding box (ghost particles, one alltoall), so the average is the serial one up to the
 summation order.  The time spent is in sim.timers["nonlocal"].
@@ -66,7 +69,7 @@ import math
 import numba
 import numpy as np
 
-from ..kernels.threads import PRANGE, RETURN_CHUNK, chunk, particle_chunks
+from ..kernels.threads import PRANGE, RETURN_CHUNK, particle_chunks
 from .validation import check_positive, check_real
 
 __all__ = ["NonlocalSoftening", "nonlocal_average", "regularise", "refresh_due",
@@ -87,20 +90,26 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
     """out[p] = <kap>_p = sum_q w_pq V_q kap_q / sum_q w_pq V_q for the first
     n_own points p of x (the rest are ghosts), w = r / l^2 exp(-(r/l)^2) for r < 3 l
     (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`. The points
-    are binned serially, then averaged in parallel chunks (the same bits on any number of
+    are binned serially; only the points whose bin lies within the cutoff of a bin holding
+    kap != 0 are averaged (the others get 0 without a neighbour scan: _near_hot), in
+    parallel chunks that take every nc-th of those points, so a plastic zone in one corner
+    of the particle order is spread over the threads (the same bits on any number of
     threads)."""
-    nb, start, order, hot = _bins(x, kap, origin, hb)
-    nc = particle_chunks(n_own, RETURN_CHUNK)
-    _average(x, kap, x[order], vol[order], kap[order], n_own, nb, start, hot,
-             (CUTOFF * length) ** 2, 1.0 / (length * length),
-             int(math.ceil(CUTOFF * length / hb)), nc,
+    nb, start, order, hot, lin = _bins(x, kap, origin, hb)
+    nr = int(math.ceil(CUTOFF * length / hb))
+    near = _near_hot(hot, nb, nr + 1, x.shape[1])
+    act = np.flatnonzero(near[lin[:n_own]])
+    out[:n_own] = 0.0
+    nc = particle_chunks(len(act), RETURN_CHUNK)
+    _average(x, kap, x[order], vol[order], kap[order], act, nb, start, hot,
+             (CUTOFF * length) ** 2, 1.0 / (length * length), nr, nc,
              np.ascontiguousarray(origin, dtype=np.float64), float(hb), out)
 
 
 @numba.njit(cache=True)
 def _bins(x, kap, origin, hb):
-    """Bin counts nb per axis, the points sorted by bin (start, order) and the bins holding
-    a point with kap != 0 (hot)."""
+    """Bin counts nb per axis, the points sorted by bin (start, order), the bins holding
+    a point with kap != 0 (hot) and each point's bin (lin)."""
     n, d = x.shape
     b = np.zeros((n, 3), dtype=np.int64)
     nb = np.ones(3, dtype=np.int64)
@@ -124,19 +133,40 @@ def _bins(x, kap, origin, hb):
         fill[lin[j]] += 1
         if kap[j] != 0.0:
             hot[lin[j]] = True
-    return nb, start, order, hot
+    return nb, start, order, hot, lin
+
+
+@numba.njit(cache=True)
+def _near_hot(hot, nb, r, d):
+    """The bins within r bins of a hot bin along every axis (hot dilated by a (2 r + 1)^d
+    box, one axis at a time): with r = ceil(cutoff / hb) + 1 a superset of the bins whose
+    points have a hot bin among the bins they scan (_near_rows)."""
+    near = hot.copy()
+    for k in range(d):
+        stride = 1
+        for j in range(k + 1, 3):
+            stride *= nb[j]
+        grown = np.zeros_like(near)
+        for c in range(len(near)):
+            if near[c]:
+                ck = (c // stride) % nb[k]
+                for e in range(max(0, ck - r), min(nb[k], ck + r + 1)):
+                    grown[c + (e - ck) * stride] = True
+        near = grown
+    return near
 
 
 @numba.njit(cache=True, parallel=PRANGE)
-def _average(x, kap, xs, vs, ks, n_own, nb, start, hot, rad2, il2, nr, nc, origin, hb, out):
-    """The averages of nonlocal_average, chunk c of nc on a thread each; xs, vs, ks: the
-    points' positions, volumes and kappa sorted by bin (contiguous reads)."""
+def _average(x, kap, xs, vs, ks, act, nb, start, hot, rad2, il2, nr, nc, origin, hb, out):
+    """The averages of nonlocal_average at the points act, chunk c of nc (the points
+    act[c], act[c + nc], ...) on a thread each; xs, vs, ks: the points' positions, volumes
+    and kappa sorted by bin (contiguous reads)."""
     d = x.shape[1]
     room = (2 * nr + 3) ** (d - 1)
     for c in numba.prange(nc):
-        lo, hi = chunk(n_own, nc, c)
         rows = np.empty((room, 2), dtype=np.int64)
-        for p in range(lo, hi):
+        for i in range(c, len(act), nc):
+            p = act[i]
             k = _near_rows(x, p, origin, hb, rad2, nb, rows)
             out[p] = _average_one(x[p], kap[p], xs, vs, ks, start, hot, rad2, il2, rows, k)
 
