@@ -27,7 +27,8 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
-from fenicsmpm.materials.regularisation import nonlocal_average
+from fenicsmpm.materials.regularisation import (_share_plan, _share_scans, _with_ghosts,
+                                                nonlocal_average)
 from fenicsmpm.problems.localisation import W5_SOIL, shear_layer, shear_layer_simulation
 
 C_U = W5_SOIL["c_u"]
@@ -245,6 +246,35 @@ def test_nonlocal_average_of_a_small_plastic_zone_against_brute_force():
     far = np.linalg.norm(x[:n_own], axis=1) > 0.08 + 3 * l
     assert far.sum() > 1000 and np.all(out[far] == 0.0)
     assert np.count_nonzero(out) > 50
+
+
+def test_share_plan_moves_the_excess_to_the_idle_ranks():
+    """_share_plan: ranks above the mean hand points to ranks below it, none below min_share."""
+    assert _share_plan([1000, 0], 256) == [(0, 1, 500)]
+    assert _share_plan([300, 0], 256) == []
+    assert _share_plan([900, 300, 0], 10) == [(0, 1, 100), (0, 2, 400)]
+    assert _share_plan([0, 0], 256) == []
+
+
+def test_scans_shared_between_ranks_give_the_same_bits(comm):
+    """_share_scans (regularise under MPI): the plastic zone on rank 0's side; rank 0 hands
+    half of its scans with their neighbourhoods to rank 1 (on 2 ranks), and every average
+    has the bits of the unshared nonlocal_average on the same local and ghost points."""
+    rng = np.random.default_rng(7)
+    xg = rng.uniform(0.0, 1.0, (6000, 2))
+    vol_g = rng.uniform(0.5, 1.5, 6000)
+    kap_g = np.where(np.linalg.norm(xg, axis=1) < 0.3, rng.uniform(0.01, 0.1, 6000), 0.0)
+    mine = (xg[:, 0] * comm.size).astype(int) == comm.rank
+    l, hb, origin = 0.05, 0.02, np.zeros(2)
+    x, vol, kap = _with_ghosts(comm, xg[mine], vol_g[mine], kap_g[mine], 3 * l)
+    n_own = int(mine.sum())
+    out, ref = np.full(n_own, np.nan), np.full(n_own, np.nan)
+    given = _share_scans(comm, x, vol, kap, n_own, origin, hb, l, out)
+    nonlocal_average(x, vol, kap, n_own, origin, hb, l, ref)
+    assert np.array_equal(out, ref)
+    assert np.count_nonzero(out) > 100 or comm.rank > 0
+    if comm.size == 2:
+        assert comm.allgather(given)[0] > 500
 
 
 def test_parameters_are_checked():

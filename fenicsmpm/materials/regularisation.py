@@ -62,7 +62,10 @@ so a plastic zone that is one block of the particle order still spreads over the
 the same bits on any number of threads.  Under
 MPI every rank receives the particles of the other ranks within 3 l of its particles'
 bounding box (ghost particles, one alltoall), so the average is the serial one up to the
-summation order.  The time spent is in sim.timers["nonlocal"].
+summation order; the plastic zone, where averages are computed, usually lies on one rank,
+so a rank with more than its share of points to scan hands the excess, with the points
+within 3 l of them, to ranks with fewer, which average them with the same bits and send the
+averages back (_share_scans, two more alltoalls).  The time spent is in sim.timers["nonlocal"].
 """
 import math
 
@@ -91,19 +94,86 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
     n_own points p of x (the rest are ghosts), w = r / l^2 exp(-(r/l)^2) for r < 3 l
     (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`. The points
     are binned serially; only the points whose bin lies within the cutoff of a bin holding
-    kap != 0 are averaged (the others get 0 without a neighbour scan: _near_hot), in
+    kap != 0 are averaged (the others get 0 without a neighbour scan: scanned_points), in
     parallel chunks that take every nc-th of those points, so a plastic zone in one corner
     of the particle order is spread over the threads (the same bits on any number of
     threads)."""
-    nb, start, order, hot, lin = _bins(x, kap, origin, hb)
-    nr = int(math.ceil(CUTOFF * length / hb))
-    near = _near_hot(hot, nb, nr + 1, x.shape[1])
-    act = np.flatnonzero(near[lin[:n_own]])
     out[:n_own] = 0.0
-    nc = particle_chunks(len(act), RETURN_CHUNK)
-    _average(x, kap, x[order], vol[order], kap[order], act, nb, start, hot,
-             (CUTOFF * length) ** 2, 1.0 / (length * length), nr, nc,
+    act = scanned_points(x, kap, n_own, origin, hb, length)
+    out[act] = average_at(x, vol, kap, act, origin, hb, length)
+
+
+def scanned_points(x, kap, n_own, origin, hb, length):
+    """The indices p < n_own whose average nonlocal_average computes: the points whose bin
+    lies within the cutoff (plus a bin) of a bin holding kap != 0 (_near_hot); every other
+    point's average is 0."""
+    nb, _, _, hot, lin = _bins(x, kap, origin, hb)
+    near = _near_hot(hot, nb, int(math.ceil(CUTOFF * length / hb)) + 1, x.shape[1])
+    return np.flatnonzero(near[lin[:n_own]])
+
+
+def average_at(x, vol, kap, pts, origin, hb, length):
+    """<kap> of nonlocal_average at the points pts (indices into x) over all the points of x.
+    The sums visit the bins in a fixed geometric order and the points of a bin in their
+    order in x, so any subset of x that keeps the order and holds every point within the
+    cutoff of pts gives the same bits (_share_scans)."""
+    nb, start, order, hot, _ = _bins(x, kap, origin, hb)
+    nr = int(math.ceil(CUTOFF * length / hb))
+    out = np.zeros(len(x))
+    _average(x, kap, x[order], vol[order], kap[order], np.asarray(pts, dtype=np.int64), nb,
+             start, hot, (CUTOFF * length) ** 2, 1.0 / (length * length), nr,
+             particle_chunks(len(pts), RETURN_CHUNK),
              np.ascontiguousarray(origin, dtype=np.float64), float(hb), out)
+    return out[pts]
+
+
+def _share_plan(counts, min_share=RETURN_CHUNK):
+    """Moves (source, destination, k) that bring every rank's count of points to scan towards
+    the mean: ranks above ceil(mean) hand their excess to ranks below it, in rank order; no
+    move of fewer than min_share points. The same on every rank (from the allgathered
+    counts)."""
+    target = -(-int(sum(counts)) // len(counts))
+    load = [int(c) for c in counts]
+    moves = []
+    for s in range(len(load)):
+        for d in range(len(load)):
+            k = min(load[s] - target, target - load[d])
+            if k >= min_share:
+                moves.append((s, d, k))
+                load[s] -= k
+                load[d] += k
+    return moves
+
+
+def _share_scans(comm, x, vol, kap, n_own, origin, hb, length, out):
+    """nonlocal_average under MPI with the scanning shared between the ranks: the plastic
+    zone, where the averages are computed, usually lies on one rank. A rank with more than
+    its share of points to scan (_share_plan) sends the last of them with every point of x
+    within the cutoff of their bounding box (in x's order) to a rank with fewer, which
+    averages them (average_at: the same bits) and sends the averages back (two
+    alltoalls). Returns the number of points this rank handed to others."""
+    out[:n_own] = 0.0
+    act = scanned_points(x, kap, n_own, origin, hb, length)
+    moves = _share_plan(comm.allgather(len(act)))
+    send, given, r = [None] * comm.size, [], comm.rank
+    for s, d, k in moves:
+        if s == r:
+            pts, act = act[len(act) - k:], act[:len(act) - k]
+            reach = CUTOFF * length * (1.0 + 1e-9) + 1e-9 * hb
+            lo, hi = x[pts].min(axis=0) - reach, x[pts].max(axis=0) + reach
+            sel = np.flatnonzero(np.all((x > lo) & (x < hi), axis=1))
+            send[d] = (x[sel], vol[sel], kap[sel], np.searchsorted(sel, pts))
+            given.append((d, pts))
+    back = [None] * comm.size
+    for src, job in enumerate(comm.alltoall(send)):
+        if job is not None:
+            back[src] = average_at(np.ascontiguousarray(job[0]), job[1], job[2], job[3],
+                                   origin, hb, length)
+    out[act] = average_at(x, vol, kap, act, origin, hb, length)
+    got = comm.alltoall(back)
+    for d, pts in given:
+        out[pts] = got[d]
+    return sum(len(pts) for _, pts in given)
 
 
 @numba.njit(cache=True)
@@ -158,9 +228,9 @@ def _near_hot(hot, nb, r, d):
 
 @numba.njit(cache=True, parallel=PRANGE)
 def _average(x, kap, xs, vs, ks, act, nb, start, hot, rad2, il2, nr, nc, origin, hb, out):
-    """The averages of nonlocal_average at the points act, chunk c of nc (the points
-    act[c], act[c + nc], ...) on a thread each; xs, vs, ks: the points' positions, volumes
-    and kappa sorted by bin (contiguous reads)."""
+    """The averages of average_at at the points act, chunk c of nc (the points act[c],
+    act[c + nc], ...) on a thread each; xs, vs, ks: the points' positions, volumes and
+    kappa sorted by bin (contiguous reads)."""
     d = x.shape[1]
     room = (2 * nr + 3) ** (d - 1)
     for c in numba.prange(nc):
@@ -319,7 +389,9 @@ def regularise(sim, dt):
         x, vol, kap = _with_ghosts(comm, p.x[idx], p.V[idx], p.state[idx, 0],
                                    CUTOFF * mat.nonlocal_length)
         out = np.empty(len(idx))
-        if len(idx):
+        if comm.size > 1:
+            _share_scans(comm, x, vol, kap, len(idx), origin, grid.h, mat.nonlocal_length, out)
+        elif len(idx):
             nonlocal_average(x, vol, kap, len(idx), origin, grid.h, mat.nonlocal_length, out)
         p.state[idx, mat.nonlocal_column] = out
     sim.timers["nonlocal"] = sim.timers.get("nonlocal", 0.0) + time.perf_counter() - t0
