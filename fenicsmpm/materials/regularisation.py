@@ -94,16 +94,16 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
     n_own points p of x (the rest are ghosts), w = r / l^2 exp(-(r/l)^2) for r < 3 l
     (Galavi & Schweiger 2010), neighbours found in bins of size hb from `origin`. The points
     are binned serially; only the points whose bin lies within the cutoff of a bin holding
-    kap != 0 are averaged (the others get 0 without a neighbour scan: scanned_points), in
+    kap != 0 are averaged (the others get 0 without a neighbour scan: _scanned_points), in
     parallel chunks that take every nc-th of those points, so a plastic zone in one corner
     of the particle order is spread over the threads (the same bits on any number of
     threads)."""
     out[:n_own] = 0.0
-    act = scanned_points(x, kap, n_own, origin, hb, length)
-    out[act] = average_at(x, vol, kap, act, origin, hb, length)
+    act = _scanned_points(x, kap, n_own, origin, hb, length)
+    out[act] = _average_at(x, vol, kap, act, origin, hb, length)
 
 
-def scanned_points(x, kap, n_own, origin, hb, length):
+def _scanned_points(x, kap, n_own, origin, hb, length):
     """The indices p < n_own whose average nonlocal_average computes: the points whose bin
     lies within the cutoff (plus a bin) of a bin holding kap != 0 (_near_hot); every other
     point's average is 0."""
@@ -112,7 +112,7 @@ def scanned_points(x, kap, n_own, origin, hb, length):
     return np.flatnonzero(near[lin[:n_own]])
 
 
-def average_at(x, vol, kap, pts, origin, hb, length):
+def _average_at(x, vol, kap, pts, origin, hb, length):
     """<kap> of nonlocal_average at the points pts (indices into x) over all the points of x.
     The sums visit the bins in a fixed geometric order and the points of a bin in their
     order in x, so any subset of x that keeps the order and holds every point within the
@@ -150,10 +150,10 @@ def _share_scans(comm, x, vol, kap, n_own, origin, hb, length, out):
     zone, where the averages are computed, usually lies on one rank. A rank with more than
     its share of points to scan (_share_plan) sends the last of them with every point of x
     within the cutoff of their bounding box (in x's order) to a rank with fewer, which
-    averages them (average_at: the same bits) and sends the averages back (two
+    averages them (_average_at: the same bits) and sends the averages back (two
     alltoalls). Returns the number of points this rank handed to others."""
     out[:n_own] = 0.0
-    act = scanned_points(x, kap, n_own, origin, hb, length)
+    act = _scanned_points(x, kap, n_own, origin, hb, length)
     moves = _share_plan(comm.allgather(len(act)))
     send, given, r = [None] * comm.size, [], comm.rank
     for s, d, k in moves:
@@ -167,9 +167,9 @@ def _share_scans(comm, x, vol, kap, n_own, origin, hb, length, out):
     back = [None] * comm.size
     for src, job in enumerate(comm.alltoall(send)):
         if job is not None:
-            back[src] = average_at(np.ascontiguousarray(job[0]), job[1], job[2], job[3],
+            back[src] = _average_at(np.ascontiguousarray(job[0]), job[1], job[2], job[3],
                                    origin, hb, length)
-    out[act] = average_at(x, vol, kap, act, origin, hb, length)
+    out[act] = _average_at(x, vol, kap, act, origin, hb, length)
     got = comm.alltoall(back)
     for d, pts in given:
         out[pts] = got[d]
@@ -228,7 +228,7 @@ def _near_hot(hot, nb, r, d):
 
 @numba.njit(cache=True, parallel=PRANGE)
 def _average(x, kap, xs, vs, ks, act, nb, start, hot, rad2, il2, nr, nc, origin, hb, out):
-    """The averages of average_at at the points act, chunk c of nc (the points act[c],
+    """The averages of _average_at at the points act, chunk c of nc (the points act[c],
     act[c + nc], ...) on a thread each; xs, vs, ks: the points' positions, volumes and
     kappa sorted by bin (contiguous reads)."""
     d = x.shape[1]
