@@ -99,25 +99,27 @@ def nonlocal_average(x, vol, kap, n_own, origin, hb, length, out):
     of the particle order is spread over the threads (the same bits on any number of
     threads)."""
     out[:n_own] = 0.0
-    act = _scanned_points(x, kap, n_own, origin, hb, length)
-    out[act] = _average_at(x, vol, kap, act, origin, hb, length)
+    act, bins = _scanned_points(x, kap, n_own, origin, hb, length)
+    out[act] = _average_at(x, vol, kap, act, origin, hb, length, bins)
 
 
 def _scanned_points(x, kap, n_own, origin, hb, length):
-    """The indices p < n_own whose average nonlocal_average computes: the points whose bin
-    lies within the cutoff (plus a bin) of a bin holding kap != 0 (_near_hot); every other
-    point's average is 0."""
-    nb, _, _, hot, lin = _bins(x, kap, origin, hb)
+    """(act, bins): the indices p < n_own whose average nonlocal_average computes (the points
+    whose bin lies within the cutoff (plus a bin) of a bin holding kap != 0, _near_hot; every
+    other point's average is 0) and the binning of x (_bins), for _average_at."""
+    bins = _bins(x, kap, origin, hb)
+    nb, _, _, hot, lin = bins
     near = _near_hot(hot, nb, int(math.ceil(CUTOFF * length / hb)) + 1, x.shape[1])
-    return np.flatnonzero(near[lin[:n_own]])
+    return np.flatnonzero(near[lin[:n_own]]), bins
 
 
-def _average_at(x, vol, kap, pts, origin, hb, length):
-    """<kap> of nonlocal_average at the points pts (indices into x) over all the points of x.
-    The sums visit the bins in a fixed geometric order and the points of a bin in their
-    order in x, so any subset of x that keeps the order and holds every point within the
-    cutoff of pts gives the same bits (_share_scans)."""
-    nb, start, order, hot, _ = _bins(x, kap, origin, hb)
+def _average_at(x, vol, kap, pts, origin, hb, length, bins=None):
+    """<kap> of nonlocal_average at the points pts (indices into x) over all the points of x
+    (bins: _bins(x, kap, origin, hb) when the caller has it). The sums visit the bins in a
+    fixed geometric order and the points of a bin in their order in x, so any subset of x
+    that keeps the order and holds every point within the cutoff of pts gives the same bits
+    (_share_scans)."""
+    nb, start, order, hot, _ = _bins(x, kap, origin, hb) if bins is None else bins
     nr = int(math.ceil(CUTOFF * length / hb))
     out = np.zeros(len(x))
     _average(x, kap, x[order], vol[order], kap[order], np.asarray(pts, dtype=np.int64), nb,
@@ -153,7 +155,7 @@ def _share_scans(comm, x, vol, kap, n_own, origin, hb, length, out):
     averages them (_average_at: the same bits) and sends the averages back (two
     alltoalls). Returns the number of points this rank handed to others."""
     out[:n_own] = 0.0
-    act = _scanned_points(x, kap, n_own, origin, hb, length)
+    act, bins = _scanned_points(x, kap, n_own, origin, hb, length)
     moves = _share_plan(comm.allgather(len(act)))
     send, given, r = [None] * comm.size, [], comm.rank
     for s, d, k in moves:
@@ -169,7 +171,7 @@ def _share_scans(comm, x, vol, kap, n_own, origin, hb, length, out):
         if job is not None:
             back[src] = _average_at(np.ascontiguousarray(job[0]), job[1], job[2], job[3],
                                    origin, hb, length)
-    out[act] = _average_at(x, vol, kap, act, origin, hb, length)
+    out[act] = _average_at(x, vol, kap, act, origin, hb, length, bins)
     got = comm.alltoall(back)
     for d, pts in given:
         out[pts] = got[d]
