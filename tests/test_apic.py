@@ -64,7 +64,7 @@ def test_apic_transfers_an_affine_field_exactly():
     p.v[:] = p.x @ A.T
     p.apic_C[:] = A
     sim.locate_and_shape()
-    m, mv = sim.integrator._p2g(sim, p.v, p.x, True)
+    m, mv = sim.integrator._p2g(sim)
     g.accumulate(m, mv)
     on = m > 1e-12 * m.max()
     v = mv[on] / m[on, None]

@@ -231,3 +231,44 @@ def test_nonlocal_average_same_bits_on_1_and_2_threads():
         numba.set_num_threads(before)
     assert np.any(outs[0] != 0.0)
     assert np.array_equal(outs[0], outs[1])
+
+
+@pytest.mark.parametrize("d", [2, 3])
+def test_affine_matrix_is_B_times_inverse_of_D(d):
+    """kernels.transfer._affine_matrix (closed-form inverse, no allocation): C_p = B_p D_p^-1
+    of numpy's solve to 1e-12, in 2D and 3D; the gradient fallback where D_p is singular."""
+    rng = np.random.default_rng(11 + d)
+    n, nn, nv = 200, 300, 3 ** d
+    nodes = np.array([rng.choice(nn, nv, replace=False) for _ in range(n)], dtype=np.int32)
+    N, dN = rng.random((n, nv)), rng.standard_normal((n, nv, d))
+    x, node_x, v = rng.random((n, d)), rng.random((nn, d)), rng.standard_normal((nn, d))
+    C = np.zeros((n, d, d))
+    for p in range(n):
+        kt._affine_matrix((0,) * d, nodes, N, dN, node_x, v, x, p, C)
+    r = node_x[nodes] - x[:, None, :]                                  # (n, nv, d)
+    B = np.einsum("pa,pak,pal->pkl", N, v[nodes], r)
+    Dm = np.einsum("pa,pak,pal->pkl", N, r, r)
+    ref = np.linalg.solve(np.transpose(Dm, (0, 2, 1)), np.transpose(B, (0, 2, 1)))
+    assert _rel(C, np.transpose(ref, (0, 2, 1))) < 1e-12
+    node_x[:] = x[0]                                # every node at particle 0: D_0 = 0
+    kt._affine_matrix((0,) * d, nodes, N, dN, node_x, v, x, 0, C)
+    assert np.allclose(C[0], np.einsum("ak,al->kl", v[nodes[0]], dN[0]), rtol=1e-14, atol=0)
+
+
+@pytest.mark.parametrize("nc", [1, 2, 5])
+def test_fused_affine_g2p_momentum_equals_the_two_passes(data, nc):
+    """g2p_affine_momentum (MUSL's G2P and its affine P2G in one particle pass, cut into nc
+    chunks) gives g2p_affine's particle state bit for bit and p2g_affine's momentum at the
+    start positions to 1e-14."""
+    D, nodes, N, dN, n, nn, d = (data[k] for k in ("D", "nodes", "N", "dN", "n", "nn", "d"))
+    x, v, w, w2, m, nx = data["x"], data["v"], data["w"], data["w2"], data["mass"], data["node_x"]
+    s0 = [x.copy(), v.copy(), x.copy(), data["C"].copy()]
+    s1 = [a.copy() for a in s0]
+    kt.g2p_affine(D, nodes, N, dN, nx, 0.01 * w, w2, w, 0.9, *s0)
+    mv0 = np.zeros((nn, d))
+    kt._affine(D, nodes, N, m, s0[1], s0[3], x, nx, False, 0, n, np.zeros(1), mv0)
+    mv1 = np.ones((nn, d))
+    kt._g2p_affine_momentum_chunks(nc, D, nodes, N, dN, nx, 0.01 * w, w2, w, 0.9, *s1, m, mv1,
+                                   *_bufs(nc, mv1))
+    assert all(np.array_equal(a, b) for a, b in zip(s0, s1))
+    assert _rel(mv1 - 1.0, mv0) < 1e-14

@@ -140,7 +140,7 @@ class Explicit:
         v_p = p.v.copy()
         p.apic_C[:] = 0.0
         for _ in range(2):
-            m, mv = self._p2g(sim, p.v, p.x, True)
+            m, mv = self._p2g(sim)
             g.accumulate(m, mv)
             active = sim.active_mask(m)
             inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
@@ -156,16 +156,15 @@ class Explicit:
         du = sim.prescribed_increment(sim.t, sim.t + dt, self.displacement)
         return None if du is None else du / dt
 
-    def _p2g(self, sim, v, x, with_mass):
-        """Nodal mass (with_mass) and momentum of the particle velocities v (= p.v) at
-        positions x, local (not yet summed over ranks): affine (APIC) by `transfer`, else
-        the simulation's plain P2G."""
+    def _p2g(self, sim):
+        """Nodal mass and momentum of the particles, local (not yet summed over ranks): affine
+        (APIC, kernels.transfer.p2g_affine) by `transfer`, else the simulation's plain P2G."""
         if self.transfer not in AFFINE:
-            return sim.nodal_mass_momentum() if with_mass else (None, sim.nodal_weighted(v))
+            return sim.nodal_mass_momentum()
         g, p = sim.grid, sim.particles
-        m = np.zeros(g.n_nodes) if with_mass else np.zeros(1)
+        m = np.zeros(g.n_nodes)
         mv = np.zeros((g.n_nodes, g.gdim))
-        kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, v, p.apic_C, x, g.node_x, with_mass, m, mv)
+        kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, p.v, p.apic_C, p.x, g.node_x, True, m, mv)
         return m, mv
 
     def _kick(self, sim, dt):
@@ -200,7 +199,7 @@ class Explicit:
         p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
         t0 = time.perf_counter()
         self._gaps = [b.gaps(sim) for b in sim.frictions]
-        m, mv = self._p2g(sim, p.v, p.x, True)
+        m, mv = self._p2g(sim)
         grid.accumulate(m, mv)
         T["p2g"] += time.perf_counter() - t0
         active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
@@ -243,12 +242,16 @@ class Explicit:
         t2 = time.perf_counter()
         affine = self.transfer in AFFINE
         remap = self.scheme in ("MUSL", "AVG")     # the updated velocities mapped back
-        x_start = p.x.copy() if affine and remap else p.x
         mv2 = None
-        if affine:
+        aflip = self.flip if self.transfer == "aflip" else 0.0
+        if affine and remap:                         # G2P and that P2G in one particle pass
+            mv2 = np.zeros_like(mv)
+            kt.g2p_affine_momentum(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v0,
+                                   v1, aflip, p.x, p.v, p.u, p.apic_C, p.mass, mv2)
+        elif affine:
             kt.g2p_affine(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v0, v1,
-                          self.flip if self.transfer == "aflip" else 0.0, p.x, p.v, p.u, p.apic_C)
-        elif remap:                                  # G2P and that P2G in one particle pass
+                          aflip, p.x, p.v, p.u, p.apic_C)
+        elif remap:
             mv2 = np.zeros_like(mv)
             kt.g2p_momentum(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v,
                             p.u, p.mass, mv2)
@@ -260,8 +263,6 @@ class Explicit:
         T["g2p"] += t3 - t2
         du = dt * v1                                # what the particles moved by (CPDI2 corners)
         if remap:
-            if mv2 is None:
-                _, mv2 = self._p2g(sim, p.v, x_start, False)
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
             if vp is not None:

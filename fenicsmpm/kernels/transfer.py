@@ -432,52 +432,82 @@ def _g2p_momentum_chunks(nc, D, nodes, N, du, v_old, v_new, flip, x, v, u, mass,
 
 
 @njit(cache=True)
-def _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo, hi):
+def _affine_matrix(D, nodes, N, dN, node_x, v_new, x, p, C):
+    """C_p = B_p D_p^-1 of g2p_affine for particle p (closed-form inverse, no allocation),
+    or sum v_i (x) grad N_ip where D_p is singular."""
     d = len(D)
-    B = np.zeros((d, d))
-    Dm = np.zeros((d, d))
-    for p in range(lo, hi):
-        B[:] = 0.0
-        Dm[:] = 0.0
-        m = row_length(nodes, p)
-        for a in range(m):
-            i = nodes[p, a]
-            w = N[p, a]
-            for k in range(d):
-                rk = node_x[i, k] - x[p, k]
-                for l in range(d):
-                    rl = node_x[i, l] - x[p, l]
-                    B[k, l] += w * v_new[i, k] * rl
-                    Dm[k, l] += w * rk * rl
-        det = Dm[0, 0] * Dm[1, 1] - Dm[0, 1] * Dm[1, 0] if d == 2 else np.linalg.det(Dm)
-        scale = Dm[0, 0] + Dm[d - 1, d - 1]
-        if abs(det) > 1e-8 * scale ** d:
-            Dinv = np.linalg.inv(Dm)
-            for k in range(d):
-                for l in range(d):
-                    c = 0.0
-                    for j in range(d):
-                        c += B[k, j] * Dinv[j, l]
-                    C[p, k, l] = c
-        else:
-            for k in range(d):
-                for l in range(d):
-                    c = 0.0
-                    for a in range(m):
-                        c += v_new[nodes[p, a], k] * dN[p, a, l]
-                    C[p, k, l] = c
+    b00 = b01 = b02 = b10 = b11 = b12 = b20 = b21 = b22 = 0.0
+    d00 = d01 = d02 = d11 = d12 = d22 = 0.0
+    m = row_length(nodes, p)
+    for a in range(m):
+        i = nodes[p, a]
+        w = N[p, a]
+        r0 = node_x[i, 0] - x[p, 0]
+        r1 = node_x[i, 1] - x[p, 1]
+        w0 = w * v_new[i, 0]
+        w1 = w * v_new[i, 1]
+        b00 += w0 * r0
+        b01 += w0 * r1
+        b10 += w1 * r0
+        b11 += w1 * r1
+        d00 += w * r0 * r0
+        d01 += w * r0 * r1
+        d11 += w * r1 * r1
+        if d == 3:
+            r2 = node_x[i, 2] - x[p, 2]
+            w2 = w * v_new[i, 2]
+            b02 += w0 * r2
+            b12 += w1 * r2
+            b20 += w2 * r0
+            b21 += w2 * r1
+            b22 += w2 * r2
+            d02 += w * r0 * r2
+            d12 += w * r1 * r2
+            d22 += w * r2 * r2
+    if d == 2:
+        det = d00 * d11 - d01 * d01
+        ok = abs(det) > 1e-8 * (d00 + d11) ** 2
+        if ok:
+            i00, i01, i11 = d11 / det, -d01 / det, d00 / det
+            C[p, 0, 0] = b00 * i00 + b01 * i01
+            C[p, 0, 1] = b00 * i01 + b01 * i11
+            C[p, 1, 0] = b10 * i00 + b11 * i01
+            C[p, 1, 1] = b10 * i01 + b11 * i11
+    else:
+        c00 = d11 * d22 - d12 * d12             # cofactors of the symmetric D_p
+        c01 = d02 * d12 - d01 * d22
+        c02 = d01 * d12 - d02 * d11
+        c11 = d00 * d22 - d02 * d02
+        c12 = d01 * d02 - d00 * d12
+        c22 = d00 * d11 - d01 * d01
+        det = d00 * c00 + d01 * c01 + d02 * c02
+        ok = abs(det) > 1e-8 * (d00 + d22) ** 3
+        if ok:
+            i00, i01, i02 = c00 / det, c01 / det, c02 / det
+            i11, i12, i22 = c11 / det, c12 / det, c22 / det
+            C[p, 0, 0] = b00 * i00 + b01 * i01 + b02 * i02
+            C[p, 0, 1] = b00 * i01 + b01 * i11 + b02 * i12
+            C[p, 0, 2] = b00 * i02 + b01 * i12 + b02 * i22
+            C[p, 1, 0] = b10 * i00 + b11 * i01 + b12 * i02
+            C[p, 1, 1] = b10 * i01 + b11 * i11 + b12 * i12
+            C[p, 1, 2] = b10 * i02 + b11 * i12 + b12 * i22
+            C[p, 2, 0] = b20 * i00 + b21 * i01 + b22 * i02
+            C[p, 2, 1] = b20 * i01 + b21 * i11 + b22 * i12
+            C[p, 2, 2] = b20 * i02 + b21 * i12 + b22 * i22
+    if not ok:
         for k in range(d):
-            dx = 0.0
-            dv = 0.0
-            vp = 0.0
-            for a in range(m):
-                i = nodes[p, a]
-                dx += N[p, a] * du[i, k]
-                dv += N[p, a] * (v_new[i, k] - v_old[i, k])
-                vp += N[p, a] * v_new[i, k]
-            x[p, k] += dx
-            u[p, k] += dx
-            v[p, k] = flip * (v[p, k] + dv) + (1.0 - flip) * vp
+            for l in range(d):
+                c = 0.0
+                for a in range(m):
+                    c += v_new[nodes[p, a], k] * dN[p, a, l]
+                C[p, k, l] = c
+
+
+@njit(cache=True)
+def _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo, hi):
+    for p in range(lo, hi):
+        _affine_matrix(D, nodes, N, dN, node_x, v_new, x, p, C)
+        g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p)
 
 
 @njit(parallel=PRANGE, cache=True)
@@ -497,6 +527,57 @@ def g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C):
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         _g2p_affine(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, lo, hi)
+
+
+@njit(cache=True)
+def _g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, mass,
+                         lo, hi, mv_out):
+    d = len(D)
+    xs = np.empty(d)
+    for p in range(lo, hi):
+        _affine_matrix(D, nodes, N, dN, node_x, v_new, x, p, C)
+        for k in range(d):
+            xs[k] = x[p, k]
+        g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p)
+        for a in range(row_length(nodes, p)):
+            w = N[p, a] * mass[p]
+            i = nodes[p, a]
+            for k in range(d):
+                s = v[p, k]
+                for l in range(d):
+                    s += C[p, k, l] * (node_x[i, l] - xs[l])
+                mv_out[i, k] += w * s
+
+
+def g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, mass,
+                        mv_out):
+    """g2p_affine, and in the same particle pass the affine momentum of the updated particles
+    with the step's weights and start positions (p2g_affine without mass: MUSL's second P2G).
+    mv_out is local (not yet summed over ranks)."""
+    nc = n_chunks(len(nodes))
+    _g2p_affine_momentum_chunks(nc, D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u,
+                                C, mass, mv_out, scratch(0, nc - 1, mv_out))
+
+
+@njit(parallel=PRANGE, cache=True)
+def _g2p_affine_momentum_chunks(nc, D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u,
+                                C, mass, mv_out, buf):
+    n = nodes.shape[0]
+    if nc == 1:
+        return _g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u,
+                                    C, mass, np.int64(0), n, mv_out)
+    rng = np.zeros((nc, 2), dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        if c == 0:
+            _g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C,
+                                 mass, lo, hi, mv_out)
+        else:
+            a, b = node_range(nodes, lo, hi, rng[c])
+            buf[c - 1, a:b] = 0.0
+            _g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C,
+                                 mass, lo, hi, buf[c - 1])
+    add_chunks2(mv_out, buf, rng)
 
 
 @njit(cache=True)
