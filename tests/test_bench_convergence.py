@@ -76,6 +76,12 @@ def test_mms_quick(out):
     # triangles: the default (CPDI2 there; measured 0.034 at n = 12) against the standard
     # family (0.091)
     assert err("Explicit-MUSL auto triangle", 12) < 0.5 * err("Explicit-MUSL mpm triangle", 12)
+    # the affine FLIP transfer with the edge layout (full sweep n = 8-64: orders 2.17 / 1.85;
+    # at n = 12 measured 0.0106 / 0.0476 against the default's 0.0258 / 0.0918)
+    stress = lambda s: next(r for r in data["runs"] if r["name"] == f"{s} n=12")["metrics"]["stress_error"]  # noqa: E731
+    edges, default = "Explicit-MUSL aflip auto triangle edges", "Explicit-MUSL auto triangle"
+    assert err(edges, 12) < 0.5 * err(default, 12)
+    assert stress(edges) < 0.6 * stress(default)
 
 
 def test_self_weight_quick(out):

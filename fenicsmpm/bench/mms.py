@@ -8,7 +8,8 @@ Unit square, neo-Hookean E = 1e7, nu = 0.3, rho0 = 1000, amplitude A = 0.05 (F11
 t_end = 1 / (2 c). Series (integrator x shape family): explicit MUSL (dt = 0.2 h / c_p)
 with every shape family ("mpm", "ugimp", "cpgimp", "cpdi1", "cpdi2"), the same on triangles
 (each square split in two) with the default shape="auto" (CPDI2 there) and "mpm", "auto"
-with the edge domains of Particles.fill_edges ("triangle edges": 1.5 particles a cell), and
+with the edge domains of Particles.fill_edges ("triangle edges": 1.5 particles a cell), both
+triangle layouts with CPDI2 and the affine FLIP transfer ("MUSL aflip"), and
 implicit Newmark (dt = h / c_p) with "mpm" and "cpgimp" (its shape="auto"). Cells per side
 n = 8, 16, 32, 64 (quick: 4, 6, 8, 12).
 
@@ -123,17 +124,20 @@ def print_summary(doc, comm, case, metrics):
 def series_list():
     """(integrator, scheme, shape, cell type): every family on quadrilaterals, and on triangles
     (the right-diagonal split of the same lattice) the default shape="auto" (CPDI2) and the
-    standard family."""
+    standard family; the default CPDI2 also with the affine FLIP transfer (scheme "MUSL
+    aflip": fm.Explicit("MUSL", transfer="aflip")), with both particle layouts."""
     quads = [("Explicit", "MUSL", s, "quadrilateral") for s in SHAPES]
-    tris = [("Explicit", "MUSL", s, c) for s, c in
-            (("auto", "triangle"), ("auto", EDGES), ("mpm", "triangle"))]
+    tris = [("Explicit", sc, s, c) for sc, s, c in
+            (("MUSL", "auto", "triangle"), ("MUSL", "auto", EDGES), ("MUSL", "mpm", "triangle"),
+             ("MUSL aflip", "auto", "triangle"), ("MUSL aflip", "auto", EDGES))]
     return quads + tris + [("Newmark", "Newmark", "mpm", "quadrilateral"),
                            ("Newmark", "Newmark", "cpgimp", "quadrilateral")]
 
 
 def _integrator(kind, scheme):
     import fenicsmpm as fm
-    return fm.Explicit(scheme) if kind == "Explicit" else fm.Newmark()
+    order, _, transfer = scheme.partition(" ")      # "MUSL aflip": order and transfer
+    return fm.Explicit(order, transfer=transfer or None) if kind == "Explicit" else fm.Newmark()
 
 
 def run_one(kind, scheme, shape, cell, n_cells, comm):
@@ -156,7 +160,8 @@ def run_one(kind, scheme, shape, cell, n_cells, comm):
     series = f"{kind}-{scheme} {shape}" if kind == "Explicit" else f"Newmark {shape}"
     if cell != "quadrilateral":
         series += f" {cell}"
-    cfg = dict(problem="V3 MMS axis-aligned", integrator=kind, scheme=scheme, shape=sim.shape,
+    cfg = dict(problem="V3 MMS axis-aligned", integrator=kind, scheme=scheme.split()[0],
+               transfer=getattr(integ, "transfer", None), shape=sim.shape,
                h=ex.h, dt=ex.dt, ppc=n / common.gsum(comm, sim.grid.n_owned_cells),
                fill=fill, cell_type=cell.split()[0], cells_along=n_cells,
                A=ex.A, E=ex.E, nu=ex.nu, density=ex.rho, t_end=ex.t_end,
