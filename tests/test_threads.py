@@ -75,7 +75,7 @@ def test_p2g_chunks_match_serial(data, nc):
     kt._mass(nodes, N, m, 0, n, s0)
     kt._p2g_mass_chunks(nc, nodes, N, m, s1, *_bufs(nc, s1))
     assert _rel(s1, s0) < 1e-14
-    aff = (D, nodes, N, m, v, data["C"], data["x"], data["node_x"], True)
+    aff = (D, nodes, N, m, v, data["C"], data["x"], data["node_x"])
     a0, b0, a1, b1 = np.zeros(nn), np.zeros((nn, d)), np.zeros(nn), np.zeros((nn, d))
     kt._affine(*aff, 0, n, a0, b0)
     kt._p2g_affine_chunks(nc, *aff, a1, b1, *_bufs(nc, a1, b1))
@@ -266,7 +266,7 @@ def test_fused_affine_g2p_momentum_equals_the_two_passes(data, nc):
     s1 = [a.copy() for a in s0]
     kt.g2p_affine(D, nodes, N, dN, nx, 0.01 * w, w2, w, 0.9, *s0)
     mv0 = np.zeros((nn, d))
-    kt._affine(D, nodes, N, m, s0[1], s0[3], x, nx, False, 0, n, np.zeros(1), mv0)
+    kt._affine(D, nodes, N, m, s0[1], s0[3], x, nx, 0, n, np.zeros(nn), mv0)
     mv1 = np.ones((nn, d))
     kt._g2p_affine_momentum_chunks(nc, D, nodes, N, dN, nx, 0.01 * w, w2, w, 0.9, *s1, m, mv1,
                                    *_bufs(nc, mv1))

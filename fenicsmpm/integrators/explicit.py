@@ -164,7 +164,7 @@ class Explicit:
         g, p = sim.grid, sim.particles
         m = np.zeros(g.n_nodes)
         mv = np.zeros((g.n_nodes, g.gdim))
-        kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, p.v, p.apic_C, p.x, g.node_x, True, m, mv)
+        kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, p.v, p.apic_C, p.x, g.node_x, m, mv)
         return m, mv
 
     def _kick(self, sim, dt):

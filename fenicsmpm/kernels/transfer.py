@@ -193,15 +193,14 @@ def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
 
 
 @njit(cache=True)
-def _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, m_out, mv_out):
+def _affine(D, nodes, N, mass, v, C, x, node_x, lo, hi, m_out, mv_out):
     d = len(D)
     for p in range(lo, hi):
         mp = mass[p]
         for a in range(row_length(nodes, p)):
             w = N[p, a] * mp
             i = nodes[p, a]
-            if with_mass:
-                m_out[i] += w
+            m_out[i] += w
             for k in range(d):
                 s = v[p, k]
                 for l in range(d):
@@ -209,32 +208,32 @@ def _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, m_out, mv_out
                 mv_out[i, k] += w * s
 
 
-def p2g_affine(D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out):
+def p2g_affine(D, nodes, N, mass, v, C, x, node_x, m_out, mv_out):
     """APIC momentum (Jiang et al. 2015, eq 10 with C_p in place of B_p D_p^-1):
-        (m v)_i += sum_p N_ip m_p (v_p + C_p (x_i - x_p)),   m_i += sum_p N_ip m_p (with_mass).
+        (m v)_i += sum_p N_ip m_p (v_p + C_p (x_i - x_p)),   m_i += sum_p N_ip m_p.
     With C_p the velocity gradient of the last G2P (g2p_affine) an affine velocity field is
     carried to the nodes exactly (partition of unity and linear reproduction)."""
     nc = n_chunks(len(nodes))
-    _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out,
+    _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, m_out, mv_out,
                        scratch(0, nc - 1, m_out), scratch(1, nc - 1, mv_out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, with_mass, m_out, mv_out, mb,
+def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, m_out, mv_out, mb,
                        mvb):
     n = nodes.shape[0]
     if nc == 1:
-        return _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, np.int64(0), n, m_out, mv_out)
+        return _affine(D, nodes, N, mass, v, C, x, node_x, np.int64(0), n, m_out, mv_out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
-            _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, m_out, mv_out)
+            _affine(D, nodes, N, mass, v, C, x, node_x, lo, hi, m_out, mv_out)
         else:
             a, b = node_range(nodes, lo, hi, rng[c])
             mb[c - 1, a:b] = 0.0
             mvb[c - 1, a:b] = 0.0
-            _affine(D, nodes, N, mass, v, C, x, node_x, with_mass, lo, hi, mb[c - 1], mvb[c - 1])
+            _affine(D, nodes, N, mass, v, C, x, node_x, lo, hi, mb[c - 1], mvb[c - 1])
     add_chunks1(m_out, mb, rng)
     add_chunks2(mv_out, mvb, rng)
 
