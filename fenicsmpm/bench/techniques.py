@@ -13,7 +13,8 @@ brackets):
   MUSL mpm (baseline), USF, USL, AVG (seed 002 §4.4 half-step order)       [update order]
   GA rho_b=1, 0.8, 0.5 (fm.ExplicitGeneralizedAlpha; quick: 0.8 only)    [update order]
   MUSL cpgimp, MUSL cpdi2 (baselines GIMP and CPDI; full: also ugimp, cpdi1, gauss) [shape]
-  MUSL mpm apic, MUSL cpgimp apic (fm.Explicit(transfer="apic"), Jiang et al. 2015)  [transfer]
+  MUSL mpm apic, MUSL cpgimp apic (fm.Explicit(transfer="apic"), Jiang et al. 2015),
+  MUSL cpgimp aflip (transfer="aflip", Fei et al. 2021)                     [transfer]
   MUSL mpm + split (sim.enable_splitting(2, 0.5, 1), seed 002 §3.4)        [splitting]
   MUSL mpm + smoothed (stress_feedback="smoothed", seed 002 eqs 4.18-4.19)   [stress feedback]
   MUSL mpm + mixed (force_integration="mixed": Gauss points in full cells, particles at
@@ -112,6 +113,7 @@ def configurations(quick=False):
     c += [_cfg(f"MUSL {s}", "shape", shape=s)
           for s in (("cpgimp", "cpdi2") if quick else ("ugimp", "cpgimp", "cpdi1", "cpdi2", "gauss"))]
     c += [_cfg(f"MUSL {s} apic", "transfer", shape=s, transfer="apic") for s in ("mpm", "cpgimp")]
+    c += [_cfg("MUSL cpgimp aflip", "transfer", shape="cpgimp", transfer="aflip")]
     c += [_cfg("MUSL mpm + split", "splitting", split=True)]
     c += [_cfg("MUSL mpm + smoothed", "stress feedback", smoothed=True)]
     c += [_cfg("MUSL mpm + mixed", "force integration", mixed=True)]
