@@ -193,19 +193,26 @@ def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
 
 
 @njit(cache=True)
-def _affine(D, nodes, N, mass, v, C, x, node_x, lo, hi, m_out, mv_out):
+def _affine_momentum(D, nodes, N, mass, v, C, xp, node_x, p, mv_out):
+    """(m v)_i += N_ip m_p (v_p + C_p (x_i - xp)) over particle p's nodes (xp: its position
+    at the start of the step)."""
     d = len(D)
+    for a in range(row_length(nodes, p)):
+        w = N[p, a] * mass[p]
+        i = nodes[p, a]
+        for k in range(d):
+            s = v[p, k]
+            for l in range(d):
+                s += C[p, k, l] * (node_x[i, l] - xp[l])
+            mv_out[i, k] += w * s
+
+
+@njit(cache=True)
+def _affine(D, nodes, N, mass, v, C, x, node_x, lo, hi, m_out, mv_out):
     for p in range(lo, hi):
-        mp = mass[p]
         for a in range(row_length(nodes, p)):
-            w = N[p, a] * mp
-            i = nodes[p, a]
-            m_out[i] += w
-            for k in range(d):
-                s = v[p, k]
-                for l in range(d):
-                    s += C[p, k, l] * (node_x[i, l] - x[p, l])
-                mv_out[i, k] += w * s
+            m_out[nodes[p, a]] += N[p, a] * mass[p]
+        _affine_momentum(D, nodes, N, mass, v, C, x[p], node_x, p, mv_out)
 
 
 def p2g_affine(D, nodes, N, mass, v, C, x, node_x, m_out, mv_out):
@@ -538,14 +545,7 @@ def _g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, 
         for k in range(d):
             xs[k] = x[p, k]
         g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p)
-        for a in range(row_length(nodes, p)):
-            w = N[p, a] * mass[p]
-            i = nodes[p, a]
-            for k in range(d):
-                s = v[p, k]
-                for l in range(d):
-                    s += C[p, k, l] * (node_x[i, l] - xs[l])
-                mv_out[i, k] += w * s
+        _affine_momentum(D, nodes, N, mass, v, C, xs, node_x, p, mv_out)
 
 
 def g2p_affine_momentum(D, nodes, N, dN, node_x, du, v_old, v_new, flip, x, v, u, C, mass,

@@ -162,8 +162,7 @@ def _share_scans(comm, x, vol, kap, n_own, origin, hb, length, out):
         if s == r:
             pts, act = act[len(act) - k:], act[:len(act) - k]
             reach = CUTOFF * length * (1.0 + 1e-9) + 1e-9 * hb
-            lo, hi = x[pts].min(axis=0) - reach, x[pts].max(axis=0) + reach
-            sel = np.flatnonzero(np.all((x > lo) & (x < hi), axis=1))
+            sel = np.flatnonzero(_in_box(x, x[pts].min(axis=0), x[pts].max(axis=0), reach))
             send[d] = (x[sel], vol[sel], kap[sel], np.searchsorted(sel, pts))
             given.append((d, pts))
     back = [None] * comm.size
@@ -332,6 +331,11 @@ def _average_one(xp, kp, xs, vs, ks, start, hot, rad2, il2, rows, k):
     return num / den if den > 0.0 else kp
 
 
+def _in_box(x, lo, hi, radius):
+    """Mask of the points x strictly within `radius` of the box [lo, hi]."""
+    return np.all((x > lo - radius) & (x < hi + radius), axis=1)
+
+
 def _with_ghosts(comm, x, vol, kap, radius):
     """(x, V, kappa) of the local points followed by the other ranks' points within `radius`
     of the local bounding box (one alltoall); the local points come first."""
@@ -345,7 +349,7 @@ def _with_ghosts(comm, x, vol, kap, radius):
         if r == comm.rank or not len(x):
             send.append(None)
             continue
-        sel = np.all((x > lo - radius) & (x < hi + radius), axis=1)
+        sel = _in_box(x, lo, hi, radius)
         send.append((x[sel], vol[sel], kap[sel]) if np.any(sel) else None)
     got = [g for g in comm.alltoall(send) if g is not None]
     return (np.ascontiguousarray(np.concatenate([x] + [g[0] for g in got])),
