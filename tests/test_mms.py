@@ -54,6 +54,15 @@ def test_errors_vanish_on_the_exact_solution():
     assert err["displacement"] < 1e-14 and err["stress"] < 1e-14, err
 
 
+def test_scene_takes_the_library_default_shape():
+    """axis_aligned without shape= gets what a user's Simulation gets (shape="auto": cpGIMP on
+    these axis-aligned quadrilaterals), not the standard family."""
+    import inspect
+    assert inspect.signature(fm.Simulation).parameters["shape"].default == "auto"
+    sim, ex = axis_aligned(fm.Explicit("MUSL"), n_cells=4)
+    assert sim.shape == "cpgimp", sim.shape
+
+
 def _run(n, c=comm):
     sim, ex = axis_aligned(fm.Explicit("MUSL"), n_cells=n, shape="cpdi2", comm=c)
     sim.run(steps=ex.steps, progress=False)

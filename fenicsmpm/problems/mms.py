@@ -123,13 +123,14 @@ class AxisAligned:
         return self.acceleration(X, t) - np.c_[divx, divy] / self.rho
 
 
-def axis_aligned(integrator, n_cells=16, per_cell=2, shape="mpm", A=0.05, E=1e7, nu=0.3,
+def axis_aligned(integrator, n_cells=16, per_cell=2, shape="auto", A=0.05, E=1e7, nu=0.3,
                  density=1000.0, dt=None, cfl=0.2, cell_type=dmesh.CellType.quadrilateral,
                  comm=MPI.COMM_WORLD, partitioner=None, fill="cells"):
     """V3 on the unit square with n_cells x n_cells cells; returns (sim, exact), exact an
     AxisAligned with t_end and h. dt defaults to cfl * h / c_p (explicit) or h / c_p
-    (implicit). Shapes other than "mpm" get the vertex-ghost partitioner (needed under MPI)
-    unless `partitioner` is given. fill: "cells" (Particles.fill, per_cell per direction) or
+    (implicit). shape: Simulation(shape=...), the library's default "auto" unless given.
+    Shapes other than "mpm" get the vertex-ghost partitioner (needed under MPI) unless
+    `partitioner` is given. fill: "cells" (Particles.fill, per_cell per direction) or
     "edges" (Particles.fill_edges on triangles: one particle per edge, per_cell unused)."""
     ex = AxisAligned(A, E, nu, density)
     if partitioner is None and shape != "mpm":
