@@ -22,9 +22,11 @@ means there) and the plateau's error. Writes
 out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlement, one
 curve per row).
 
-Rows h<h_i>-centred and h<h_i>-rough-centred (quick: only the rough one): the default and
-rough rows with the footing's edge at a cell centre, h_i = implicit_cell_size(h) below (2.5 /
-5.5 / 10.5 cells under B/2), where the footing is exactly B/2 wide.
+Rows h<h_i>-centred, h<h_i>-rough-centred, h<h_i>-mc20-centred and h<h_i>-mc30-centred
+(quick: only the rough one): the default, rough, mc20 and mc30 rows with the footing's edge
+at a cell centre, h_i = implicit_cell_size(h) below (2.5 / 5.5 / 10.5 cells under B/2), where
+the footing is exactly B/2 wide (with its edge on a grid line, the rigid footing's contact
+reaches the nodes of that line, half a cell beyond B/2: contact.multi_velocity's gap check).
 
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
@@ -81,8 +83,10 @@ ROWS = (("default", "auto", "auto", {}, PUSH),
         ("mc30-mpm", "mpm", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH))
 COARSE_ONLY = ("mpm-fbar-off", "mc30-mpm")     # rows run at h >= 0.1 only
 # the defaults with the footing's edge at a cell centre (implicit_cell_size: B/2 exactly);
-# name, strip_footing options, in the quick run too
-CENTRED_ROWS = (("centred", {}, False), ("rough-centred", dict(mu=10.0), True))
+# name, strip_footing options, in the quick run too, (t_end, plateau from)
+CENTRED_ROWS = (("centred", {}, False, PUSH), ("rough-centred", dict(mu=10.0), True, PUSH),
+                ("mc20-centred", dict(soil=_mohr_coulomb(20.0), room=1.0), False, MC_PUSH),
+                ("mc30-centred", dict(soil=_mohr_coulomb(30.0), room=1.0), False, MC_PUSH))
 
 
 def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
@@ -200,10 +204,10 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             if h < 0.1 and name in COARSE_ONLY:
                 continue
             explicit_row(_row(h, name, shape, use_fbar, comm, push, **scene))
-        for name, scene, in_quick in CENTRED_ROWS:
+        for name, scene, in_quick, push in CENTRED_ROWS:
             if quick and not in_quick:
                 continue
-            explicit_row(_row(implicit_cell_size(h), name, "auto", "auto", comm, PUSH, **scene))
+            explicit_row(_row(implicit_cell_size(h), name, "auto", "auto", comm, push, **scene))
         for name, scene in IMPLICIT_ROWS:
             r = _implicit_row(implicit_cell_size(h), name, comm, **scene)
             runs.append(r)
