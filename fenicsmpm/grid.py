@@ -279,10 +279,14 @@ class Grid:
 
         A no-op on one rank. Each array has shape (n_nodes,) or (n_nodes, k). With periodic
         sides (`periodic`, boundaries.periodic) the sums are then tied over the node pairs."""
-        if self.comm.size == 1:
-            if self.periodic is not None:
-                self.periodic.tie(*arrays)
-            return
+        if self.comm.size > 1:
+            self._scatter(arrays, add=True)
+        if self.periodic is not None:
+            self.periodic.tie(*arrays)
+
+    def _scatter(self, arrays, add):
+        """Through a dolfinx vector of the nodes' index map: with add, the ghosts' values
+        added to their owners' (reverse scatter); then the owners' values to the ghosts."""
         from dolfinx.la import ScatterMode, vector
         imap = self.V.dofmap.index_map
         for arr in arrays:
@@ -291,11 +295,16 @@ class Grid:
             if vec is None:
                 vec = self._exchange[bs] = vector(imap, bs=bs)
             vec.array[:] = arr.ravel()
-            vec.scatter_reverse(ScatterMode.add)
+            if add:
+                vec.scatter_reverse(ScatterMode.add)
             vec.scatter_forward()
             arr[...] = vec.array.reshape(arr.shape)
-        if self.periodic is not None:
-            self.periodic.tie(*arrays)
+
+    def update_ghosts(self, *arrays):
+        """Copy each owned node's value to its ghost copies on the other ranks (a forward
+        scatter; arrays of shape (n_nodes,) or (n_nodes, k)). A no-op on one rank."""
+        if self.comm.size > 1:
+            self._scatter(arrays, add=False)
 
     def ensure_vertex_ring(self):
         """Give the mesh the vertex ghost layer that shape functions wider than one cell (GIMP,

@@ -27,6 +27,9 @@ Rows h<h_i>-centred, h<h_i>-rough-centred, h<h_i>-mc20-centred and h<h_i>-mc30-c
 at a cell centre, h_i = implicit_cell_size(h) below (2.5 / 5.5 / 10.5 cells under B/2), where
 the footing is exactly B/2 wide (with its edge on a grid line, the rigid footing's contact
 reaches the nodes of that line, half a cell beyond B/2: contact.multi_velocity's gap check).
+Rows h<h_i>-paired-centred and h<h_i>-mc20-paired-centred (full run only): the centred and
+mc20-centred rows with fm.ExplicitContact(interface="paired") (one constraint per node pair
+across the footing's base, contact.multi_velocity's "Paired interface").
 
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
@@ -86,7 +89,10 @@ COARSE_ONLY = ("mpm-fbar-off", "mc30-mpm")     # rows run at h >= 0.1 only
 # name, strip_footing options, in the quick run too, (t_end, plateau from)
 CENTRED_ROWS = (("centred", {}, False, PUSH), ("rough-centred", dict(mu=10.0), True, PUSH),
                 ("mc20-centred", dict(soil=_mohr_coulomb(20.0), room=1.0), False, MC_PUSH),
-                ("mc30-centred", dict(soil=_mohr_coulomb(30.0), room=1.0), False, MC_PUSH))
+                ("mc30-centred", dict(soil=_mohr_coulomb(30.0), room=1.0), False, MC_PUSH),
+                ("paired-centred", dict(interface="paired"), False, PUSH),
+                ("mc20-paired-centred", dict(soil=_mohr_coulomb(20.0), room=1.0,
+                                             interface="paired"), False, MC_PUSH))
 
 
 def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
@@ -111,6 +117,7 @@ def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
                h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral",
                nu=scene["soil"].nu if "soil" in scene else scene.get("nu", 0.49),
                mu=scene.get("mu", 0.0), soil=repr(scene["soil"]) if "soil" in scene else "VonMises",
+               interface=scene.get("interface", "node"),
                cells_under_half_width=0.5 / h)
     rec = common.make_record(f"h{h:g}-{name}", cfg,
                              sim.particles.n_global(), common.global_cells(sim),

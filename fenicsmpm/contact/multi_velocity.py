@@ -97,6 +97,20 @@ Rigid bodies' polylines move with their prescribed velocity. The per-body contac
 again `body_contact_force`, and `penalty_stats` holds the step's number of pairs, slipping
 pairs and largest penetration.
 
+Paired interface (interface="paired", multi-velocity with a rigid body and the gap check, on
+axis-aligned lattices; an option, measured in docs/guide/contact.md): at the nodes a
+deformable body A shares with a rigid body R whose normal lies within 18 degrees of a grid
+axis, the node below R's surface along that axis and its neighbour above it carry the
+surface velocity v_s = xi v_above + (1 - xi) v_below (xi: the surface's height over the lower
+node in spacings), and one constraint per pair holds (v_s^A - v_s^R) . n to the allowed
+approach, split between the two nodes with the least change of kinetic energy
+(paired_rigid_contact). The node-wise projection holds the lower node itself to the body, so
+a layer of A up to a cell thick moves with R and the contact force rings with one cell's
+period as R's surface crosses node rows (the footing sawtooth of docs/guide/choosing.md).
+With it, a Dirichlet-fixed velocity component (a roller: a symmetry plane) is taken out of
+the mass gradients before the normals are formed: on a half model's symmetry line the
+mass-gradient normal is otherwise diagonal and the roller then keeps only half of the
+normal correction.
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
 boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
 and their force is shared among the bodies at a node by mass, like the external force.
@@ -120,6 +134,8 @@ __all__ = ["ExplicitContact", "set_body", "body_ids"]
 ALGORITHMS = ("multi-velocity", "penalty")
 LATERAL = 1.5           # gap check: particles within LATERAL half-sizes of a node's normal line
 NORMALS = ("average", "max-gradient")
+INTERFACES = ("node", "paired")
+ALIGNED = 0.95          # interface="paired": pairs where the normal is within 18 deg of a grid axis
 
 
 def set_body(particles, body_id, region=None):
@@ -138,6 +154,28 @@ def set_body(particles, body_id, region=None):
     sel = sel if region is None else sel.astype(bool)
     b[sel] = body_id
     return b
+
+
+def lattice_neighbours(grid):
+    """nbr[i, 2 k] / nbr[i, 2 k + 1]: the local node one lattice spacing below / above node i
+    along axis k, -1 where none (grid.structured lattices)."""
+    st = grid._structured
+    ijk = np.rint((grid.node_x - st["origin_global"]) / st["spacing_global"]).astype(np.int64)
+    d = grid.gdim
+    lo = ijk.min(axis=0) - 1
+    ext = ijk.max(axis=0) - lo + 2
+    strides = np.cumprod(np.concatenate([[1], ext[:-1]]))
+    flat = (ijk - lo) @ strides
+    order = np.argsort(flat, kind="stable")
+    sflat = flat[order]
+    nbr = np.full((len(flat), 2 * d), -1, dtype=np.int64)
+    for k in range(d):
+        for side, step in ((0, -1), (1, 1)):
+            key = flat + step * strides[k]
+            pos = np.minimum(np.searchsorted(sflat, key), len(sflat) - 1)
+            hit = sflat[pos] == key
+            nbr[hit, 2 * k + side] = order[pos[hit]]
+    return nbr
 
 
 def _finite_vector(value):
@@ -443,6 +481,133 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
 
 
 @njit(cache=True)
+def _pair_apply(i, w, lam, A, n, m_b, v_b, fc, dt, d):
+    """v^A_i += lam w / m^A_i n (the pair's normal impulse share), its force into fc."""
+    if i < 0 or w == 0.0:
+        return
+    s = lam * w / m_b[i, A]
+    for k in range(d):
+        v_b[i, A, k] += s * n[k]
+        fc[i, A, k] += m_b[i, A] * s * n[k] / dt
+
+
+@njit(cache=True)
+def paired_rigid_contact(cand, body_a, body_r, present, m_b, gm_b, mu, mode, n_fixed, has_fixed,
+                         ref_n, lo_b, hi_b, node_x, nbr, spacing, surf_tol, gap_tol, dt, v_b, fc,
+                         status, hold):
+    """Contact of a deformable body A with a rigid body R at the nodes cand[i] (one of each
+    there, both present, the gap check's normal line through i meeting R), as one constraint
+    per pair of nodes across R's surface instead of one per node (interface="paired").
+
+    Along the grid axis k closest to A's outward normal n, the node b on A's side of R's
+    surface (at depth xi spacing_k below it along that axis) and its neighbour a on R's side
+    carry the velocity at the surface, v_s = xi v_a + (1 - xi) v_b (linear interpolation
+    across the cell). Contact holds the normal relative velocity there,
+        (v_s^A - v_s^R) . n <= allowed  (the gap check's approach, module docstring),
+    with the least change of kinetic energy: dv_j = lam w_j / m^A_j n, w_a = xi, w_b = 1 - xi,
+    lam = -(excess) / (w_a^2 / m^A_a + w_b^2 / m^A_b). The node-wise projection holds both
+    nodes to the body, so a soil layer xi spacing_k thick moved with a footing and the
+    reaction rang with one cell's period as the base crossed node rows. A node without such a
+    partner is constrained alone (w = 1). Friction (mu[A, R]) acts at the R-side node as in
+    the node-wise projection. Status and hold as in multi_velocity_contact."""
+    n_nodes, nb, d = v_b.shape
+    G = np.empty(d)
+    nrm = np.empty(d)
+    done = np.zeros(n_nodes, dtype=np.bool_)
+    for sweep in range(2):                 # pairs from the A-side nodes first, then singles
+        for i in range(n_nodes):
+            if not cand[i] or done[i]:
+                continue
+            A, R = body_a[i], body_r[i]
+            for k in range(d):
+                G[k] = gm_b[i, A, k] + gm_b[i, R, k]
+            if not _normal(i, A, present, gm_b, mode, n_fixed, has_fixed, G, nrm):
+                done[i] = True
+                continue
+            s = 0.0
+            zeta = 0.0
+            for k in range(d):
+                s += nrm[k] * ref_n[i, k]
+                zeta += node_x[i, k] * ref_n[i, k]
+            if s >= 0.0:
+                sigma = lo_b[i, R]
+                gap = lo_b[i, R] - hi_b[i, A]
+            else:
+                sigma = -hi_b[i, R]
+                zeta = -zeta
+                gap = lo_b[i, A] - hi_b[i, R]
+            a_side = zeta < sigma - surf_tol
+            if sweep == 0 and not a_side:
+                continue
+            partner = -1
+            xi = 0.0
+            if sweep == 0:
+                ax = 0
+                for k in range(1, d):
+                    if abs(ref_n[i, k]) > abs(ref_n[i, ax]):
+                        ax = k
+                e_ax = ref_n[i, ax] if s >= 0.0 else -ref_n[i, ax]
+                j = nbr[i, 2 * ax + (1 if e_ax > 0.0 else 0)]
+                if (j >= 0 and cand[j] and not done[j] and body_a[j] == A and body_r[j] == R):
+                    partner = j
+                    xi = min(max((sigma - zeta) / (abs(e_ax) * spacing[ax]), 0.0), 1.0)
+            done[i] = True
+            if partner >= 0:
+                done[partner] = True
+            wa, wb = xi, 1.0 - xi          # a = partner (R side), b = i
+            if partner < 0:
+                wb = 1.0
+                wa = 0.0
+            allowed = max(gap - gap_tol, 0.0) / dt
+            dvn = 0.0
+            for k in range(d):
+                rel = wb * (v_b[i, A, k] - v_b[i, R, k])
+                if partner >= 0:
+                    rel += wa * (v_b[partner, A, k] - v_b[partner, R, k])
+                dvn += rel * nrm[k]
+            keep = hold and status[i, A] > 0
+            if not hold:
+                status[i, A] = 0
+                if partner >= 0:
+                    status[partner, A] = 0
+            if not keep and dvn <= allowed:
+                continue
+            S = wb * wb / m_b[i, A]
+            if partner >= 0:
+                S += wa * wa / m_b[partner, A]
+            lam = -(dvn - allowed) / S
+            _pair_apply(i, wb, lam, A, nrm, m_b, v_b, fc, dt, d)
+            _pair_apply(partner, wa, lam, A, nrm, m_b, v_b, fc, dt, d)
+            if hold and not keep:
+                continue
+            fr = partner if partner >= 0 else (-1 if a_side else i)
+            if not hold:
+                status[i, A] = 1
+                if partner >= 0:
+                    status[partner, A] = 1
+            if fr >= 0 and mu[A, R] > 0.0:
+                imp = abs(lam * (wa if fr == partner else wb) / m_b[fr, A])
+                tn = 0.0
+                t = np.empty(d)
+                dvr = 0.0
+                for k in range(d):
+                    dvr += (v_b[fr, A, k] - v_b[fr, R, k]) * nrm[k]
+                for k in range(d):
+                    t[k] = v_b[fr, A, k] - v_b[fr, R, k] - dvr * nrm[k]
+                    tn += t[k] * t[k]
+                tn = np.sqrt(tn)
+                if hold:
+                    c = 1.0 if status[fr, A] == 2 else 0.0
+                else:
+                    c = 1.0 if tn <= mu[A, R] * imp else mu[A, R] * imp / tn
+                    status[fr, A] = 2 if c == 1.0 else 1
+                for k in range(d):
+                    dv = -c * t[k]
+                    v_b[fr, A, k] += dv
+                    fc[fr, A, k] += m_b[fr, A] * dv / dt
+
+
+@njit(cache=True)
 def g2p_bodies(D, nodes, N, body, rigid, v_rigid, dt, v_old, v_new, flip, x, v, u):
     """kernels.transfer.g2p with each particle reading its own body's nodal velocities;
     particles of rigid bodies move with the prescribed velocity v_rigid[b]."""
@@ -505,6 +670,9 @@ class ExplicitContact:
     or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
+    interface: "node" (default: against a rigid body every shared node is projected alone) or
+    "paired" (one constraint per pair of nodes across a rigid body's surface on axis-aligned
+    lattices, paired_rigid_contact; module docstring "Paired interface"); multi-velocity only.
     algorithm="penalty": penalty=dict(k_n=..., k_t=..., damping=...) (> 0, >= 0 and >= 0;
     force per unit length per unit penetration/slip, k_t defaults to k_n, about (K + 4G/3)/h
     of the stiffer body; damping the normal dashpot's ratio to critical, default 0.1),
@@ -516,8 +684,13 @@ class ExplicitContact:
     supports_friction = True            # frictional rigid boundaries act on every body's field
 
     def __init__(self, scheme="MUSL", mu=0.0, algorithm="multi-velocity", flip=1.0,
-                 rigid=None, mu_default=0.0, normal="max-gradient", gap=0.0, penalty=None):
+                 rigid=None, mu_default=0.0, normal="max-gradient", gap=0.0, penalty=None,
+                 interface="node"):
         scheme = str(scheme).upper()
+        if interface not in INTERFACES:
+            raise ValueError(f"ExplicitContact: 'interface' must be one of {INTERFACES}, got "
+                             f"{interface!r}")
+        self.interface = interface
         if scheme not in SCHEMES:
             raise ValueError(f"ExplicitContact: 'scheme' must be one of {SCHEMES}, got {scheme!r}")
         if algorithm not in ALGORITHMS:
@@ -718,17 +891,53 @@ class ExplicitContact:
         if self.nb > 1 and self.algorithm == "multi-velocity":
             if self._status is None or self._status.shape != self._m_b.shape:
                 self._status = np.zeros(self._m_b.shape, dtype=np.int8)
-            multi_velocity_contact(self._present, self._m_b, self._gm_b, self._is_rigid,
+            pairs = self._pairs(sim)
+            present = self._present if pairs is None else pairs[0]
+            multi_velocity_contact(present, self._m_b, self._gm_b, self._is_rigid,
                                    self._mu, self._mode, self._n_fixed, self._has_fixed, self._xm_b,
                                    self._rm_b, self._ref_n, self._lo_b, self._hi_b,
                                    sim.grid.node_x, 1e-9 * sim.grid.h, self._gap, dt,
                                    v_b, fc, self._status, not trial)
+            if pairs is not None:
+                _, cand, body_a, body_r, nbr, spacing = pairs
+                paired_rigid_contact(cand, body_a, body_r, self._present, self._m_b, self._gm_b,
+                                     self._mu, self._mode, self._n_fixed, self._has_fixed,
+                                     self._ref_n, self._lo_b, self._hi_b, sim.grid.node_x, nbr,
+                                     spacing, 1e-9 * sim.grid.h, self._gap, dt, v_b, fc,
+                                     self._status, not trial)
+                sim.grid.update_ghosts(v_b.reshape(v_b.shape[0], -1))
         self._friction(sim, v_b, dt, "apply" if trial else "hold")
         if sim.fixed.any():
             free = ~sim.fixed
             for b in range(self.nb):
                 if not self._is_rigid[b]:
                     v_b[:, b, :] *= free
+
+    def _pairs(self, sim):
+        """interface="paired" (paired_rigid_contact): the nodes it handles, with the presence
+        mask the node-wise projection then sees (their rigid body removed), each node's
+        deformable and rigid body, the lattice neighbours and spacing; None where it does not
+        apply (interface="node", no rigid body, the gap check off, or a grid that is not an
+        axis-aligned lattice: the node-wise projection everywhere)."""
+        grid = sim.grid
+        if (self.interface != "paired" or not self.rigid or self._gap >= 1e300
+                or not grid.structured):
+            return None
+        present, rig = self._present, self._is_rigid
+        n_def = (present & ~rig).sum(axis=1)
+        n_rig = (present & rig).sum(axis=1)
+        body_a = np.argmax(present & ~rig, axis=1).astype(np.int32)
+        body_r = np.argmax(present & rig, axis=1).astype(np.int32)
+        idx = np.arange(len(present))
+        cand = ((n_def == 1) & (n_rig == 1) & np.isfinite(self._lo_b[idx, body_r])
+                & np.isfinite(self._hi_b[idx, body_a])
+                & (np.abs(self._ref_n).max(axis=1) >= ALIGNED))
+        masked = present.copy()
+        masked[idx[cand], body_r[cand]] = False
+        if getattr(self, "_nbr_grid", None) is not grid:
+            self._nbr_grid, self._nbr = grid, lattice_neighbours(grid)
+        return (masked, cand, body_a, body_r, self._nbr,
+                np.asarray(grid._structured["spacing_global"], dtype=np.float64))
 
     def _gap_extents(self, sim, body):
         """Data of the gap check (module docstring), summed or maximised over ranks: the
@@ -825,6 +1034,8 @@ class ExplicitContact:
             mtol = sim.comm.allreduce(mtol, op=MPI.MAX)
         present = m_b > mtol
         kt.restrict_gradients(D, sim.nodes, sim.N, sim.dN, present, body)   # per body
+        if self.interface == "paired" and sim.fixed.any():   # a roller is a mirror plane:
+            gm_b = gm_b * (~sim.fixed)[:, None, :]             # no normal across it
         self._present, self._m_b, self._gm_b = present, m_b, gm_b
         self._gap_extents(sim, body)
         t0 = time.perf_counter()

@@ -45,7 +45,7 @@ def limit_pressure(soil):
 
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
                   shape="auto", fbar=None, mu=0.0, soil=None, room=None, comm=None,
-                  algorithm="multi-velocity"):
+                  algorithm="multi-velocity", interface="node"):
     """The scene: (sim, pressure, settlement): pressure() -> q / limit_pressure(soil) of the
     last step (from the global contact force; the same on every rank), settlement(t) the
     footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
@@ -54,7 +54,8 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     (None: the Tresca soil above with Poisson's ratio nu); room: the height [m] of empty
     cells above the surface, for the heave (None: 3 h); algorithm: fm.ExplicitContact's
     ("penalty": node-to-segment with k_n = rho c_p^2 / h of the soil, the soil surface and
-    the footing's outline as polylines, vertices h/2 apart)."""
+    the footing's outline as polylines, vertices h/2 apart); interface: fm.ExplicitContact's
+    ("paired": one constraint per node pair across the footing's base)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
@@ -91,7 +92,8 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
         integ.add_polyline(0, line((width, depth), (0.0, depth), 2 * nx))
         integ.add_polyline(1, rectangle((0.0, depth), (B2, depth + 2 * h), 0.5 * h), closed=True)
     else:
-        integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity}, algorithm=algorithm)
+        integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity}, algorithm=algorithm,
+                                   interface=interface)
     sim = fm.Simulation(grid, pts, integ, dt="auto", shape=shape, **kw)
     sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], width), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
