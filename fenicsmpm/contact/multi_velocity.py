@@ -934,8 +934,8 @@ class ExplicitContact:
                 & (np.abs(self._ref_n).max(axis=1) >= ALIGNED))
         masked = present.copy()
         masked[idx[cand], body_r[cand]] = False
-        if getattr(self, "_nbr_grid", None) is not grid:
-            self._nbr_grid, self._nbr = grid, lattice_neighbours(grid)
+        if getattr(self, "_nbr_of", None) is not grid.node_x:     # a rebuilt grid: again
+            self._nbr_of, self._nbr = grid.node_x, lattice_neighbours(grid)
         return (masked, cand, body_a, body_r, self._nbr,
                 np.asarray(grid._structured["spacing_global"], dtype=np.float64))
 
