@@ -891,7 +891,7 @@ class ExplicitContact:
         if self.nb > 1 and self.algorithm == "multi-velocity":
             if self._status is None or self._status.shape != self._m_b.shape:
                 self._status = np.zeros(self._m_b.shape, dtype=np.int8)
-            pairs = self._pairs(sim)
+            pairs = self._pair_data
             present = self._present if pairs is None else pairs[0]
             multi_velocity_contact(present, self._m_b, self._gm_b, self._is_rigid,
                                    self._mu, self._mode, self._n_fixed, self._has_fixed, self._xm_b,
@@ -1038,6 +1038,7 @@ class ExplicitContact:
             gm_b = gm_b * (~sim.fixed)[:, None, :]             # no normal across it
         self._present, self._m_b, self._gm_b = present, m_b, gm_b
         self._gap_extents(sim, body)
+        self._pair_data = self._pairs(sim)      # the step's pairs, for both projections
         t0 = time.perf_counter()
         inv_mb = np.divide(1.0, m_b, out=np.zeros_like(m_b), where=present)
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
