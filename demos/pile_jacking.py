@@ -89,7 +89,7 @@ def push_velocity(t):
     return (0.0, -V_PUSH * (3 * s * s - 2 * s ** 3))
 
 
-def build(h, shape="auto"):
+def build(h, shape="auto", interface="node"):
     nr, nz = int(round(R_SOIL / h)), int(round((H_SOIL + L_PILE + 1.0) / h))   # 1 m headroom
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [nr * h, nz * h]], [nr, nz],
                                  dmesh.CellType.quadrilateral)
@@ -100,7 +100,8 @@ def build(h, shape="auto"):
          + fm.Particles.fill(grid, pile, per_cell=2,
                              region=lambda x: (x[:, 0] < R_PILE) & (x[:, 1] > H_SOIL)
                              & (x[:, 1] < H_SOIL + L_PILE)))
-    integ = fm.ExplicitContact(scheme="MUSL", mu=MU, rigid={PILE: push_velocity})
+    integ = fm.ExplicitContact(scheme="MUSL", mu=MU, rigid={PILE: push_velocity},
+                               interface=interface)
     sim = fm.Simulation(grid, p, integ, dt="auto", cfl=0.5, shape=shape)
     k0 = 1.0 - math.sin(math.radians(PHI))
     k0_stress(p, density=RHO, gravity=G, K0=k0, surface=lambda x: np.full(len(x), H_SOIL))
@@ -125,6 +126,8 @@ def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="results/pile_jacking", help="output directory")
     parser.add_argument("--quick", action="store_true", help="h = 0.3 m, 0.25 m penetration")
+    parser.add_argument("--interface", default="node", choices=("node", "paired"),
+                        help="fm.ExplicitContact interface (docs/guide/contact.md)")
     parser.add_argument("--shape", default="auto", help="Simulation shape family (default "
                         "'auto': cpGIMP for Mohr-Coulomb on this grid)")
     parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
@@ -135,7 +138,7 @@ def main(argv=None):
         parser.error(f"--h must be > 0, got {args.h}")
     h = args.h or (0.3 if args.quick else 0.15)
     t_end = args.t_end or (0.6 if args.quick else 1.0)
-    sim, k0 = build(h, args.shape)
+    sim, k0 = build(h, args.shape, args.interface)
     p = sim.particles
     soil = p.material_id == 0
     base = soil & (p.x[:, 1] < 0.5 * h)
