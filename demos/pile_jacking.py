@@ -53,6 +53,23 @@ locking alone: with F-bar (fm.Simulation(..., fbar=True), off by default for Moh
 the three sizes give 2.1 / 3.8 / 42.7 kN (tip stress -25 / -41 / -1174 kPa; 2026-12-05).
 Treat it as qualitative. A 2.1 s run at h = 0.15 m stopped at 1.26 s when a surface particle
 at r = 3.85 m was thrown out of the mesh.
+The "resistance" above is the mean of the last 5 records (25 steps), which catches the
+cell-crossing ripple (+-40 %); the printed table (and "resistance_table" in the JSON) holds the
+mean over penetration windows of 0.075 m. Convergence study on a smaller soil body
+(`--h H --t-end 1 --soil 2 4`, serial, 2026-12-07): at h = 0.15 m it gives the seed-size body's
+history (window means at t = 0.6 / 0.8 / 1.0 s 26.2 / 48.9 / 23.6 kN against 25.8 / 49.7 /
+25.1 kN) in 4.4 s instead of 24 s. Mean resistance at 0.300-0.375 / 0.375-0.450 m:
+    h = 0.15 m (pile edge on a grid line, 1 cell across the radius, 1432 particles, 4.4 s)   38.4 / 37.1 kN
+    h = 0.075 m   (2 cells, 5990 particles, 46 s)                                          38.5 / 44.9 kN
+    h = 0.0375 m  (4 cells, 23434 particles, 228 s)                                        30.8 / 33.4 kN
+    h = 0.06 m    (edge at a cell centre, 2.5 cells, 9113 particles, 79 s)                 29.7 / 35.0 kN
+    h = 0.0333 m  (4.5 cells, 29880 particles, 334 s)                                       30.2 / 29.1 kN
+Not within issue 18's 5 % between the two finest of either series (h = 0.075 / 0.0375 m:
+25 / 34 % apart; 0.06 / 0.0333 m: 2 / 17 %). The ratio of the grid-line series, 1.25 / 1.34,
+is close to that of (R + h/2)^2 between the two sizes (1.23): node-wise contact holds the soil node
+next to the pile surface to the pile, so the pile acts up to half a cell wider (as the strip
+footing, docs/guide/choosing.md). A converged resistance needs the pile many cells wide or a
+contact that places the surface inside a cell.
 Writes DIR/pile_jacking.png: resistance vs penetration, penetration vs time, and the final
 vertical stress field (sigma_zz) with the pile, as rasters of squares of 3h/4 near the pile
 (fenicsmpm.io.particle_raster: the soil's mean sigma_zz, the pile's cells in black).
@@ -80,7 +97,8 @@ RHO_PILE = 7850.0
 G = 9.81
 V_PUSH, T_RAMP = 0.5, 0.1
 SOIL, PILE = 0, 1
-PLOT_R, PLOT_Z = 2.0, (H_SOIL - 3.0, H_SOIL + 1.0)      # stress-field plot window
+PLOT_R = 2.0                                  # stress-field plot window: r < 2 m, 3 m down
+BIN = 0.075                                   # penetration windows of the resistance table [m]
 
 
 def push_velocity(t):
@@ -89,22 +107,24 @@ def push_velocity(t):
     return (0.0, -V_PUSH * (3 * s * s - 2 * s ** 3))
 
 
-def build(h, shape="auto", interface="node"):
-    nr, nz = int(round(R_SOIL / h)), int(round((H_SOIL + L_PILE + 1.0) / h))   # 1 m headroom
+def build(h, shape="auto", interface="node", r_soil=R_SOIL, h_soil=H_SOIL):
+    """Simulation of a soil body r_soil wide and h_soil deep (default the seed's 5 m x 10 m)
+    with cells h, and K0 (module docstring)."""
+    nr, nz = int(round(r_soil / h)), int(round((h_soil + L_PILE + 1.0) / h))   # 1 m headroom
     msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [nr * h, nz * h]], [nr, nz],
                                  dmesh.CellType.quadrilateral)
     grid = fm.Grid(msh, axisymmetric=True)
     soil = fm.MohrCoulomb(E=E, nu=NU, density=RHO, phi=PHI, c=C, psi=PSI)
     pile = fm.LinearElastic(E=E, nu=NU, density=RHO_PILE)     # rigid: only its density is used
-    p = (fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < H_SOIL)
+    p = (fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < h_soil)
          + fm.Particles.fill(grid, pile, per_cell=2,
-                             region=lambda x: (x[:, 0] < R_PILE) & (x[:, 1] > H_SOIL)
-                             & (x[:, 1] < H_SOIL + L_PILE)))
+                             region=lambda x: (x[:, 0] < R_PILE) & (x[:, 1] > h_soil)
+                             & (x[:, 1] < h_soil + L_PILE)))
     integ = fm.ExplicitContact(scheme="MUSL", mu=MU, rigid={PILE: push_velocity},
                                interface=interface)
     sim = fm.Simulation(grid, p, integ, dt="auto", cfl=0.5, shape=shape)
     k0 = 1.0 - math.sin(math.radians(PHI))
-    k0_stress(p, density=RHO, gravity=G, K0=k0, surface=lambda x: np.full(len(x), H_SOIL))
+    k0_stress(p, density=RHO, gravity=G, K0=k0, surface=lambda x: np.full(len(x), h_soil))
     is_pile = p.material_id == 1
     p.stress[is_pile] = 0.0
     sim.start_stage(initial_stress=True, gravity=(0.0, 0.0))
@@ -115,11 +135,23 @@ def build(h, shape="auto", interface="node"):
     return sim, k0
 
 
-def tip_depth(sim):
-    """Depth of the pile tip below the original surface (global)."""
+def tip_depth(sim, h_soil=H_SOIL):
+    """Depth of the pile tip below the original surface z = h_soil (global)."""
     p = sim.particles
     zmin = float(p.x[p.material_id == 1, 1].min()) if np.any(p.material_id == 1) else np.inf
-    return H_SOIL - comm.allreduce(zmin, op=MPI.MIN) - 0.25 * sim.grid.h
+    return h_soil - comm.allreduce(zmin, op=MPI.MIN) - 0.25 * sim.grid.h
+
+
+def resistance_table(depth, force, width=BIN):
+    """Mean resistance in consecutive penetration windows [k w, (k + 1) w): rows (from, to,
+    mean force). A window spans one cell row or more from h = 0.075 m down, so the
+    cell-crossing ripple (up to +-40 % at h = 0.0375 m) averages out."""
+    rows = []
+    for k in range(int(depth.max() // width) + 1):
+        w = (depth >= k * width) & (depth < (k + 1) * width)
+        if w.any():
+            rows.append((k * width, (k + 1) * width, float(force[w].mean())))
+    return rows
 
 
 def main(argv=None):
@@ -133,22 +165,29 @@ def main(argv=None):
     parser.add_argument("--t-end", type=float, default=None, help="end time [s]")
     parser.add_argument("--h", type=float, default=None,
                         help="cell size [m] (default 0.15; --quick 0.3)")
+    parser.add_argument("--soil", type=float, nargs=2, default=(R_SOIL, H_SOIL),
+                        metavar=("RADIUS", "DEPTH"), help="soil body [m] (default the seed's "
+                        "5 10; 2 4 gives the same resistance at h = 0.15 m in 1/6 of the time)")
     args = parser.parse_args(argv)
     if args.h is not None and not args.h > 0.0:
         parser.error(f"--h must be > 0, got {args.h}")
+    r_soil, h_soil = args.soil
+    if not (r_soil >= 2 * R_PILE and h_soil > 1.0):
+        parser.error(f"--soil: the radius must be >= {2 * R_PILE} m and the depth > 1 m, "
+                     f"got {r_soil} {h_soil}")
     h = args.h or (0.3 if args.quick else 0.15)
     t_end = args.t_end or (0.6 if args.quick else 1.0)
-    sim, k0 = build(h, args.shape, args.interface)
+    sim, k0 = build(h, args.shape, args.interface, r_soil, h_soil)
     p = sim.particles
     soil = p.material_id == 0
     base = soil & (p.x[:, 1] < 0.5 * h)
     sv = comm.allreduce(float(p.stress[base, 1, 1].sum()), op=MPI.SUM) / max(1, comm.allreduce(int(base.sum())))
-    d0 = tip_depth(sim)
+    d0 = tip_depth(sim, h_soil)
     hist = []
 
     def record(s):
         f = s.integrator.body_contact_force
-        hist.append((s.t, tip_depth(s) - d0, 2 * math.pi * float(f[PILE][1])))
+        hist.append((s.t, tip_depth(s, h_soil) - d0, 2 * math.pi * float(f[PILE][1])))
 
     sim.observe(record, every=5)
     t0 = time.perf_counter()
@@ -160,15 +199,18 @@ def main(argv=None):
     nq = math.exp(math.pi * sig) * math.tan(math.radians(45 + PHI / 2)) ** 2
     shaft = MU * k0 * RHO * G * depth / 2 * 2 * math.pi * R_PILE * depth
     tip = nq * RHO * G * depth * math.pi * R_PILE ** 2
-    below = soil & (np.abs(p.x[:, 0]) < 2 * R_PILE) & (p.x[:, 1] < H_SOIL - depth) & (p.x[:, 1] > H_SOIL - depth - 1.0)
+    below = soil & (np.abs(p.x[:, 0]) < 2 * R_PILE) & (p.x[:, 1] < h_soil - depth) & (p.x[:, 1] > h_soil - depth - 1.0)
     szz_tip = comm.allreduce(float(p.stress[below, 1, 1].min()) if np.any(below) else 0.0, op=MPI.MIN)
-    res = dict(h=h, dt=sim.dt, steps=sim.step_count, wall_s=wall,
+    table = resistance_table(d, F)
+    res = dict(h=h, soil=[r_soil, h_soil], dt=sim.dt, steps=sim.step_count, wall_s=wall,
                n_particles=p.n_global(), penetration=depth, resistance=float(np.mean(F[-5:])),
                shaft_estimate=shaft, tip_estimate=tip, sigma_v_base=sv,
-               sigma_v_base_exact=-RHO * G * (H_SOIL - 0.25 * h), sigma_zz_below_tip=szz_tip)
+               sigma_v_base_exact=-RHO * G * (h_soil - 0.25 * h), sigma_zz_below_tip=szz_tip,
+               resistance_table=table)
     # the final stress field for the plot: rasters of the window near the pile (2 x 2
     # particles per cell: squares of 3h/4 hold one or more particles)
-    bounds = ((0.0, PLOT_R), PLOT_Z)
+    plot_z = (h_soil - 3.0, h_soil + 1.0)
+    bounds = ((0.0, min(PLOT_R, r_soil)), plot_z)
     shape = raster_shape(bounds, 0.75 * h)
     on_soil = p.material_id == SOIL
     szz = particle_raster(comm, p.x[on_soil], p.stress[on_soil, 1, 1], bounds, shape)
@@ -181,6 +223,8 @@ def main(argv=None):
     print(f"  resistance {res['resistance'] / 1e3:.1f} kN; estimates: shaft {shaft / 1e3:.1f} kN, "
           f"tip {tip / 1e3:.1f} kN (N_q = {nq:.1f})")
     print(f"  largest vertical stress within 1 m below the tip {szz_tip / 1e3:.1f} kPa")
+    print("  mean resistance by penetration [m]: " + ", ".join(
+        f"{a:.3f}-{b:.3f} {r / 1e3:.1f} kN" for a, b, r in table))
     os.makedirs(args.out, exist_ok=True)
     with open(os.path.join(args.out, "pile_jacking.json"), "w") as f:
         json.dump(res, f, indent=1)
@@ -188,7 +232,11 @@ def main(argv=None):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     fig, ax = plt.subplots(1, 3, figsize=(15, 5))
-    ax[0].plot(d, F / 1e3, "-")
+    ax[0].plot(d, F / 1e3, "-", lw=0.6, label="contact force")
+    for k, (lo, hi, r) in enumerate(table):
+        ax[0].plot([lo, hi], [r / 1e3, r / 1e3], "k-", lw=2,
+                   label=f"mean over {BIN} m" if k == 0 else None)
+    ax[0].legend(fontsize=8)
     ax[0].set_xlabel("penetration [m]")
     ax[0].set_ylabel("soil resistance on the pile [kN]")
     ax[0].set_title("resistance vs penetration")
@@ -200,8 +248,8 @@ def main(argv=None):
     sc = ax[2].imshow(szz.T / 1e3, origin="lower", extent=extent, cmap="viridis")
     ax[2].imshow(np.where(pile > 0, 0.0, np.nan).T, origin="lower", extent=extent, cmap="gray",
                  vmin=0.0, vmax=1.0)
-    ax[2].set_xlim(0, PLOT_R)
-    ax[2].set_ylim(*PLOT_Z)
+    ax[2].set_xlim(*bounds[0])
+    ax[2].set_ylim(*plot_z)
     ax[2].set_aspect("equal")
     ax[2].set_xlabel("r [m]")
     ax[2].set_ylabel("z [m]")

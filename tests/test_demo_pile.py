@@ -24,3 +24,18 @@ def test_pile_jacking_demo(shared_module_tmp_path):
     geostatic = -demo.RHO * demo.G * (r["penetration"] + 1.0)
     assert r["sigma_zz_below_tip"] < 2 * geostatic, r
     assert exist_on_rank0(os.path.join(out, "pile_jacking.json"), os.path.join(out, "pile_jacking.png"))
+
+
+def test_resistance_table_windows():
+    """The resistance table's windows tile the penetration and hold the mean of the force
+    recorded in them."""
+    import numpy as np
+    demo = load_demo("pile_jacking")
+    d = np.linspace(0.0, 0.2, 201)
+    F = 1e3 * (1.0 + d)
+    rows = demo.resistance_table(d, F, width=0.075)
+    assert [(round(a, 3), round(b, 3)) for a, b, _ in rows] == [(0.0, 0.075), (0.075, 0.15),
+                                                               (0.15, 0.225)]
+    for a, b, r in rows:
+        w = (d >= a) & (d < b)
+        assert abs(r - F[w].mean()) < 1e-9 * r
