@@ -31,6 +31,11 @@ Rows h<h_i>-paired-centred and h<h_i>-mc20-paired-centred (full run only): the c
 mc20-centred rows with fm.ExplicitContact(interface="paired") (one constraint per node pair
 across the footing's base, contact.multi_velocity's "Paired interface").
 
+Rows h<h>-coverage, h<h>-rough-coverage and h<h>-mc20-coverage (full run only): the default,
+rough and mc20 rows (the footing's edge on a grid line) with
+fm.ExplicitContact(interface="coverage") (the node-wise projection scaled by the footing's
+coverage of each node, contact.multi_velocity's "Coverage interface").
+
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
 (problems.localisation.strip_footing(footing="particles"), fm.QuasiStatic with the library's
@@ -83,8 +88,13 @@ ROWS = (("default", "auto", "auto", {}, PUSH),
         ("rough", "auto", "auto", dict(mu=10.0), PUSH),
         ("mc20", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0), MC_PUSH),
         ("mc30", "auto", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH),
-        ("mc30-mpm", "mpm", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH))
+        ("mc30-mpm", "mpm", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH),
+        ("coverage", "auto", "auto", dict(interface="coverage"), PUSH),
+        ("rough-coverage", "auto", "auto", dict(mu=10.0, interface="coverage"), PUSH),
+        ("mc20-coverage", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0,
+                                                interface="coverage"), MC_PUSH))
 COARSE_ONLY = ("mpm-fbar-off", "mc30-mpm")     # rows run at h >= 0.1 only
+FULL_ONLY = ("coverage", "rough-coverage", "mc20-coverage")     # not in the quick run
 # the defaults with the footing's edge at a cell centre (implicit_cell_size: B/2 exactly);
 # name, strip_footing options, in the quick run too, (t_end, plateau from)
 CENTRED_ROWS = (("centred", {}, False, PUSH), ("rough-centred", dict(mu=10.0), True, PUSH),
@@ -208,7 +218,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
             f"{r['metrics']['spread']:.3f}, {r['wall_s']:.1f} s")
     for h in ((0.25,) if quick else (0.25, 0.1, 0.05)):
         for name, shape, use_fbar, scene, push in ROWS:
-            if h < 0.1 and name in COARSE_ONLY:
+            if (h < 0.1 and name in COARSE_ONLY) or (quick and name in FULL_ONLY):
                 continue
             explicit_row(_row(h, name, shape, use_fbar, comm, push, **scene))
         for name, scene, in_quick, push in CENTRED_ROWS:

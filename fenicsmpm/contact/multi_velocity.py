@@ -107,10 +107,32 @@ approach, split between the two nodes with the least change of kinetic energy
 (paired_rigid_contact). The node-wise projection holds the lower node itself to the body, so
 a layer of A up to a cell thick moves with R and the contact force rings with one cell's
 period as R's surface crosses node rows (the footing sawtooth of docs/guide/choosing.md).
-With it, a Dirichlet-fixed velocity component (a roller: a symmetry plane) is taken out of
-the mass gradients before the normals are formed: on a half model's symmetry line the
-mass-gradient normal is otherwise diagonal and the roller then keeps only half of the
-normal correction.
+With it (and with interface="coverage"), a Dirichlet-fixed velocity component (a roller: a
+symmetry plane) is taken out of the mass gradients before the normals are formed: on a half
+model's symmetry line the mass-gradient normal is otherwise diagonal and the roller then
+keeps only half of the normal correction (and the coverage would count the body's inside as
+a neighbour along its surface).
+
+Coverage interface (interface="coverage", multi-velocity with a rigid body and the gap check,
+on axis-aligned lattices; an option, measured in docs/guide/contact.md): the node-wise
+projection against a rigid body R, each correction of node i (normal and friction) scaled by
+R's coverage of the node,
+    alpha_i = rho_i / max(rho_i, rho_j over i's lattice neighbours j along R's surface),
+    rho_i = m^R_i / V_i  (V_i the node's tributary volume: h^d, halved per grid boundary
+    crossing it, times r for axisymmetric grids, h_r / 3 on the axis),
+so a node that R covers fully (its neighbours along R's surface carry as much of R) is held
+as before, and a node at R's edge is held in proportion to the part of its cell patch that R
+covers. By the partition of unity, sum_i alpha_i V_i along a row of nodes is about R's own
+extent along its surface, so the constrained band of A is as wide as R instead of half a cell
+wider (a jacked pile's
+resistance then converges: docs/guide/contact.md). The neighbours "along R's surface" are,
+where the node's normal lies within 18 degrees of a grid axis (a face), those along the other
+axes, and elsewhere (a corner: the pile's tip edge) all lattice neighbours. For bodies with
+axis-aligned faces (footings, piles, walls): on an inclined rigid surface a node's neighbour
+inside the body makes alpha_i about 1/2 and the body is held too little (use "node" there;
+only holding the faces' neighbours at a corner, alpha_i = 1 elsewhere, left the jacked pile
+12 % apart between h = 0.075 and 0.0375 m, against 0.6 % with this rule).
+
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
 boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
 and their force is shared among the bodies at a node by mass, like the external force.
@@ -134,8 +156,8 @@ __all__ = ["ExplicitContact", "set_body", "body_ids"]
 ALGORITHMS = ("multi-velocity", "penalty")
 LATERAL = 1.5           # gap check: particles within LATERAL half-sizes of a node's normal line
 NORMALS = ("average", "max-gradient")
-INTERFACES = ("node", "paired")
-ALIGNED = 0.95          # interface="paired": pairs where the normal is within 18 deg of a grid axis
+INTERFACES = ("node", "paired", "coverage")
+ALIGNED = 0.95          # an axis within 18 deg of the normal (interfaces "paired", "coverage")
 
 
 def set_body(particles, body_id, region=None):
@@ -366,7 +388,7 @@ def _normal(i, a, present, gm_b, mode, n_fixed, has_fixed, G, nrm):
 @njit(cache=True)
 def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fixed, xm_b, rm_b,
                            ref_n, lo_b, hi_b, node_x, surf_tol, gap_tol, dt, v_b, fc, status,
-                           hold):
+                           hold, cover):
     """The projection of the module docstring, in place on v_b (n_nodes, nb, d); the contact
     force m^A (v_new - v_old) / dt is added to fc. mu: (nb, nb) friction coefficients;
     mode, n_fixed, has_fixed: the normal (see _normal); xm_b, rm_b (p2g_positions_bodies)
@@ -377,7 +399,8 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
     contact, 1 slip, 2 stick, set by the trial projection (hold=False); with hold=True the
     re-mapped velocity of MUSL/AVG keeps the contact decided in the step: relative normal
     velocity = the allowed approach, stuck bodies move with v^cm; other nodes only get the
-    approach cut."""
+    approach cut. cover[i, b]: the factor of every correction of node i against rigid body b
+    (1, or the coverage of interface="coverage", ExplicitContact._coverage)."""
     n, nb, d = v_b.shape
     vcm = np.empty(d)
     G = np.empty(d)
@@ -447,12 +470,14 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
                     gap += (xm_b[i, other, k] / m_b[i, other] - xm_b[i, a, k] / m_b[i, a]) * nrm[k]
                 if gap > gap_tol:
                     continue
+            al = cover[i, other]
             if hold and status[i, a] > 0:       # in contact: keep it for the whole step
                 dvn -= allowed
                 for k in range(d):
                     dv = -dvn * nrm[k]
                     if status[i, a] == 2:
                         dv = vcm[k] + allowed * nrm[k] - v_b[i, a, k]
+                    dv *= al
                     fc[i, a, k] += m_b[i, a] * dv / dt
                     v_b[i, a, k] += dv
                 continue
@@ -462,8 +487,8 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
                 continue
             if hold:                            # not in contact: only cut the approach
                 for k in range(d):
-                    fc[i, a, k] -= m_b[i, a] * (dvn - allowed) * nrm[k] / dt
-                    v_b[i, a, k] -= (dvn - allowed) * nrm[k]
+                    fc[i, a, k] -= al * m_b[i, a] * (dvn - allowed) * nrm[k] / dt
+                    v_b[i, a, k] -= al * (dvn - allowed) * nrm[k]
                 continue
             dvt2 = 0.0                          # tangential relative velocity
             for k in range(d):
@@ -475,7 +500,7 @@ def multi_velocity_contact(present, m_b, gm_b, rigid, mu, mode, n_fixed, has_fix
             status[i, a] = 2 if c == 1.0 else 1
             for k in range(d):                  # stick (c = 1) or Coulomb slip
                 t = v_b[i, a, k] - vcm[k] - dvn * nrm[k]
-                dv = -imp * nrm[k] - c * t
+                dv = al * (-imp * nrm[k] - c * t)
                 fc[i, a, k] += m_b[i, a] * dv / dt
                 v_b[i, a, k] += dv
 
@@ -670,9 +695,11 @@ class ExplicitContact:
     or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
-    interface: "node" (default: against a rigid body every shared node is projected alone) or
+    interface: "node" (default: against a rigid body every shared node is projected alone),
     "paired" (one constraint per pair of nodes across a rigid body's surface on axis-aligned
-    lattices, paired_rigid_contact; module docstring "Paired interface"); multi-velocity only.
+    lattices, paired_rigid_contact; module docstring "Paired interface") or "coverage" (the
+    node-wise projection scaled by the rigid body's coverage of each node; module docstring
+    "Coverage interface"); multi-velocity only.
     algorithm="penalty": penalty=dict(k_n=..., k_t=..., damping=...) (> 0, >= 0 and >= 0;
     force per unit length per unit penetration/slip, k_t defaults to k_n, about (K + 4G/3)/h
     of the stiffer body; damping the normal dashpot's ratio to critical, default 0.1),
@@ -897,7 +924,7 @@ class ExplicitContact:
                                    self._mu, self._mode, self._n_fixed, self._has_fixed, self._xm_b,
                                    self._rm_b, self._ref_n, self._lo_b, self._hi_b,
                                    sim.grid.node_x, 1e-9 * sim.grid.h, self._gap, dt,
-                                   v_b, fc, self._status, not trial)
+                                   v_b, fc, self._status, not trial, self._cover)
             if pairs is not None:
                 _, cand, body_a, body_r, nbr, spacing = pairs
                 paired_rigid_contact(cand, body_a, body_r, self._present, self._m_b, self._gm_b,
@@ -912,6 +939,45 @@ class ExplicitContact:
             for b in range(self.nb):
                 if not self._is_rigid[b]:
                     v_b[:, b, :] *= free
+
+    def _lattice(self, grid):
+        """The grid's lattice neighbours (lattice_neighbours), rebuilt with the grid's nodes."""
+        if getattr(self, "_nbr_of", None) is not grid.node_x:     # a rebuilt grid: again
+            self._nbr_of, self._nbr = grid.node_x, lattice_neighbours(grid)
+        return self._nbr
+
+    def _coverage(self, sim):
+        """cover[i, b] of multi_velocity_contact: 1, or with interface="coverage" each rigid
+        body's coverage alpha_i of node i (module docstring "Coverage interface"), computed on
+        the owned nodes and copied to the ghosts. 1 everywhere where it does not apply (no
+        rigid body, the gap check off, a grid that is not an axis-aligned lattice)."""
+        grid = sim.grid
+        n, nb = self._m_b.shape
+        cover = np.ones((n, nb))
+        if (self.interface != "coverage" or not self.rigid or self._gap >= 1e300
+                or not grid.structured):
+            return cover
+        nbr = self._lattice(grid)
+        sp = np.asarray(grid._structured["spacing_global"], dtype=np.float64)
+        vol = np.ones(n)                             # tributary volume V_i
+        for k in range(sim.gdim):
+            inner = (nbr[:, 2 * k] >= 0) & (nbr[:, 2 * k + 1] >= 0)
+            vol *= np.where(inner, sp[k], 0.5 * sp[k])
+        if grid.axisymmetric:
+            r = grid.node_x[:, 0]
+            vol *= np.where(r > 1e-9 * sp[0], r, sp[0] / 3.0)
+        along = np.abs(self._ref_n) < ALIGNED        # axes along R's surface at each node
+        for b in self.rigid:
+            rho = self._m_b[:, b] / vol
+            full = rho.copy()
+            for k in range(sim.gdim):
+                for side in (0, 1):
+                    j = nbr[:, 2 * k + side]
+                    ok = along[:, k] & (j >= 0)
+                    full[ok] = np.maximum(full[ok], rho[j[ok]])
+            cover[:, b] = np.divide(rho, full, out=np.ones(n), where=full > 0.0)
+        grid.update_ghosts(cover)
+        return cover
 
     def _pairs(self, sim):
         """interface="paired" (paired_rigid_contact): the nodes it handles, with the presence
@@ -934,9 +1000,7 @@ class ExplicitContact:
                 & (np.abs(self._ref_n).max(axis=1) >= ALIGNED))
         masked = present.copy()
         masked[idx[cand], body_r[cand]] = False
-        if getattr(self, "_nbr_of", None) is not grid.node_x:     # a rebuilt grid: again
-            self._nbr_of, self._nbr = grid.node_x, lattice_neighbours(grid)
-        return (masked, cand, body_a, body_r, self._nbr,
+        return (masked, cand, body_a, body_r, self._lattice(grid),
                 np.asarray(grid._structured["spacing_global"], dtype=np.float64))
 
     def _gap_extents(self, sim, body):
@@ -1034,11 +1098,12 @@ class ExplicitContact:
             mtol = sim.comm.allreduce(mtol, op=MPI.MAX)
         present = m_b > mtol
         kt.restrict_gradients(D, sim.nodes, sim.N, sim.dN, present, body)   # per body
-        if self.interface == "paired" and sim.fixed.any():   # a roller is a mirror plane:
+        if self.interface != "node" and sim.fixed.any():     # a roller is a mirror plane:
             gm_b = gm_b * (~sim.fixed)[:, None, :]             # no normal across it
         self._present, self._m_b, self._gm_b = present, m_b, gm_b
         self._gap_extents(sim, body)
         self._pair_data = self._pairs(sim)      # the step's pairs, for both projections
+        self._cover = self._coverage(sim)
         t0 = time.perf_counter()
         inv_mb = np.divide(1.0, m_b, out=np.zeros_like(m_b), where=present)
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
