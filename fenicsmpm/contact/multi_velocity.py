@@ -124,8 +124,7 @@ so a node that R covers fully (its neighbours along R's surface carry as much of
 as before, and a node at R's edge is held in proportion to the part of its cell patch that R
 covers. By the partition of unity, sum_i alpha_i V_i along a row of nodes is about R's own
 extent along its surface, so the constrained band of A is as wide as R instead of half a cell
-wider (a jacked pile's
-resistance then converges: docs/guide/contact.md). The neighbours "along R's surface" are,
+wider (a jacked pile's resistance then converges: docs/guide/contact.md). The neighbours "along R's surface" are,
 where the node's normal lies within 18 degrees of a grid axis (a face), those along the other
 axes, and elsewhere (a corner: the pile's tip edge) all lattice neighbours. For bodies with
 axis-aligned faces (footings, piles, walls): on an inclined rigid surface a node's neighbour
@@ -940,32 +939,42 @@ class ExplicitContact:
                 if not self._is_rigid[b]:
                     v_b[:, b, :] *= free
 
+    def _uses(self, interface, grid):
+        """Whether `interface` ("paired", "coverage") acts this step: it is the chosen one,
+        there is a rigid body, the gap check is on and the grid is an axis-aligned lattice
+        (else the node-wise projection everywhere)."""
+        return (self.interface == interface and bool(self.rigid) and self._gap < 1e300
+                and grid.structured)
+
     def _lattice(self, grid):
-        """The grid's lattice neighbours (lattice_neighbours), rebuilt with the grid's nodes."""
-        if getattr(self, "_nbr_of", None) is not grid.node_x:     # a rebuilt grid: again
-            self._nbr_of, self._nbr = grid.node_x, lattice_neighbours(grid)
-        return self._nbr
+        """(nbr, spacing, V): the grid's lattice neighbours (lattice_neighbours), spacing and
+        the nodes' tributary volumes (h^d, halved per grid boundary through the node; times r
+        on axisymmetric grids, h_r / 3 on the axis), rebuilt with the grid's nodes."""
+        if getattr(self, "_lattice_of", None) is not grid.node_x:     # a rebuilt grid: again
+            nbr = lattice_neighbours(grid)
+            sp = np.asarray(grid._structured["spacing_global"], dtype=np.float64)
+            vol = np.ones(len(nbr))
+            for k in range(grid.gdim):
+                inner = (nbr[:, 2 * k] >= 0) & (nbr[:, 2 * k + 1] >= 0)
+                vol *= np.where(inner, sp[k], 0.5 * sp[k])
+            if grid.axisymmetric:
+                r = grid.node_x[:, 0]
+                vol *= np.where(r > 1e-9 * sp[0], r, sp[0] / 3.0)
+            self._lattice_of, self._lattice_data = grid.node_x, (nbr, sp, vol)
+        return self._lattice_data
 
     def _coverage(self, sim):
         """cover[i, b] of multi_velocity_contact: 1, or with interface="coverage" each rigid
         body's coverage alpha_i of node i (module docstring "Coverage interface"), computed on
-        the owned nodes and copied to the ghosts. 1 everywhere where it does not apply (no
-        rigid body, the gap check off, a grid that is not an axis-aligned lattice)."""
+        the owned nodes and copied to the ghosts."""
         grid = sim.grid
         n, nb = self._m_b.shape
+        if not self._uses("coverage", grid):
+            if getattr(self, "_ones", None) is None or self._ones.shape != (n, nb):
+                self._ones = np.ones((n, nb))
+            return self._ones
+        nbr, _, vol = self._lattice(grid)
         cover = np.ones((n, nb))
-        if (self.interface != "coverage" or not self.rigid or self._gap >= 1e300
-                or not grid.structured):
-            return cover
-        nbr = self._lattice(grid)
-        sp = np.asarray(grid._structured["spacing_global"], dtype=np.float64)
-        vol = np.ones(n)                             # tributary volume V_i
-        for k in range(sim.gdim):
-            inner = (nbr[:, 2 * k] >= 0) & (nbr[:, 2 * k + 1] >= 0)
-            vol *= np.where(inner, sp[k], 0.5 * sp[k])
-        if grid.axisymmetric:
-            r = grid.node_x[:, 0]
-            vol *= np.where(r > 1e-9 * sp[0], r, sp[0] / 3.0)
         along = np.abs(self._ref_n) < ALIGNED        # axes along R's surface at each node
         for b in self.rigid:
             rho = self._m_b[:, b] / vol
@@ -986,8 +995,7 @@ class ExplicitContact:
         apply (interface="node", no rigid body, the gap check off, or a grid that is not an
         axis-aligned lattice: the node-wise projection everywhere)."""
         grid = sim.grid
-        if (self.interface != "paired" or not self.rigid or self._gap >= 1e300
-                or not grid.structured):
+        if not self._uses("paired", grid):
             return None
         present, rig = self._present, self._is_rigid
         n_def = (present & ~rig).sum(axis=1)
@@ -1000,8 +1008,8 @@ class ExplicitContact:
                 & (np.abs(self._ref_n).max(axis=1) >= ALIGNED))
         masked = present.copy()
         masked[idx[cand], body_r[cand]] = False
-        return (masked, cand, body_a, body_r, self._lattice(grid),
-                np.asarray(grid._structured["spacing_global"], dtype=np.float64))
+        nbr, spacing, _ = self._lattice(grid)
+        return masked, cand, body_a, body_r, nbr, spacing
 
     def _gap_extents(self, sim, body):
         """Data of the gap check (module docstring), summed or maximised over ranks: the

@@ -55,7 +55,8 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     cells above the surface, for the heave (None: 3 h); algorithm: fm.ExplicitContact's
     ("penalty": node-to-segment with k_n = rho c_p^2 / h of the soil, the soil surface and
     the footing's outline as polylines, vertices h/2 apart); interface: fm.ExplicitContact's
-    ("paired": one constraint per node pair across the footing's base)."""
+    ("paired": one constraint per node pair across the footing's base; "coverage": edge nodes
+    held in proportion to the footing's coverage of them)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
