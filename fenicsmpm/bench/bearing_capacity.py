@@ -23,7 +23,7 @@ out/bearing-capacity.json and out/bearing-capacity.png (pressure against settlem
 curve per row).
 
 Rows h<h_i>-centred, h<h_i>-rough-centred, h<h_i>-mc20-centred and h<h_i>-mc30-centred
-(quick: only the rough one): the default, rough, mc20 and mc30 rows with the footing's edge
+(quick: only the rough one; h<h_i>-rough-centred-node the rough one with interface="node"): the default, rough, mc20 and mc30 rows with the footing's edge
 at a cell centre, h_i = implicit_cell_size(h) below (2.5 / 5.5 / 10.5 cells under B/2), where
 the footing is exactly B/2 wide (with its edge on a grid line, the rigid footing's contact
 reaches the nodes of that line, half a cell beyond B/2: contact.multi_velocity's gap check).
@@ -31,10 +31,13 @@ Rows h<h_i>-paired-centred and h<h_i>-mc20-paired-centred (full run only): the c
 mc20-centred rows with fm.ExplicitContact(interface="paired") (one constraint per node pair
 across the footing's base, contact.multi_velocity's "Paired interface").
 
-Rows h<h>-coverage, h<h>-rough-coverage and h<h>-mc20-coverage (full run only): the default,
-rough and mc20 rows (the footing's edge on a grid line) with
-fm.ExplicitContact(interface="coverage") (the node-wise projection scaled by the footing's
-coverage of each node, contact.multi_velocity's "Coverage interface").
+The explicit rows take fm.ExplicitContact's default interface="auto": against the footing (an
+axis-aligned box of particles) the node-wise projection scaled by the footing's coverage of
+each node (contact.multi_velocity's "Coverage interface"; since 2026-12-07). Rows h<h>-node,
+h<h>-mpm-fbar-on-node, h<h>-nu0.3-node, h<h>-rough-node and h<h>-mc20-node (the last in the full
+run only): the default, mpm-fbar-on, nu0.3, rough and mc20 rows with interface="node" (every node projected alone, the default before: the footing acts up to half
+a cell wider, and the node on the symmetry line is held only in part, so the half model
+reads less than the whole footing, problems.footing.strip_footing(half=False)).
 
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing
@@ -89,15 +92,18 @@ ROWS = (("default", "auto", "auto", {}, PUSH),
         ("mc20", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0), MC_PUSH),
         ("mc30", "auto", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH),
         ("mc30-mpm", "mpm", "auto", dict(soil=_mohr_coulomb(30.0), room=1.0), MC_PUSH),
-        ("coverage", "auto", "auto", dict(interface="coverage"), PUSH),
-        ("rough-coverage", "auto", "auto", dict(mu=10.0, interface="coverage"), PUSH),
-        ("mc20-coverage", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0,
-                                                interface="coverage"), MC_PUSH))
+        ("node", "auto", "auto", dict(interface="node"), PUSH),
+        ("mpm-fbar-on-node", "mpm", True, dict(interface="node"), PUSH),
+        ("nu0.3-node", "auto", "auto", dict(nu=0.3, interface="node"), PUSH),
+        ("rough-node", "auto", "auto", dict(mu=10.0, interface="node"), PUSH),
+        ("mc20-node", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0,
+                                           interface="node"), MC_PUSH))
 COARSE_ONLY = ("mpm-fbar-off", "mc30-mpm")     # rows run at h >= 0.1 only
-FULL_ONLY = ("coverage", "rough-coverage", "mc20-coverage")     # not in the quick run
+FULL_ONLY = ("mc20-node",)     # not in the quick run
 # the defaults with the footing's edge at a cell centre (implicit_cell_size: B/2 exactly);
 # name, strip_footing options, in the quick run too, (t_end, plateau from)
 CENTRED_ROWS = (("centred", {}, False, PUSH), ("rough-centred", dict(mu=10.0), True, PUSH),
+                ("rough-centred-node", dict(mu=10.0, interface="node"), True, PUSH),
                 ("mc20-centred", dict(soil=_mohr_coulomb(20.0), room=1.0), False, MC_PUSH),
                 ("mc30-centred", dict(soil=_mohr_coulomb(30.0), room=1.0), False, MC_PUSH),
                 ("paired-centred", dict(interface="paired"), False, PUSH),
@@ -127,7 +133,7 @@ def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):
                h=h, dt=sim.dt, ppc=4, cell_type="quadrilateral",
                nu=scene["soil"].nu if "soil" in scene else scene.get("nu", 0.49),
                mu=scene.get("mu", 0.0), soil=repr(scene["soil"]) if "soil" in scene else "VonMises",
-               interface=scene.get("interface", "node"),
+               interface=sim.integrator.interface,
                cells_under_half_width=0.5 / h)
     rec = common.make_record(f"h{h:g}-{name}", cfg,
                              sim.particles.n_global(), common.global_cells(sim),

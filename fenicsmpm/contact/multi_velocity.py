@@ -107,16 +107,19 @@ approach, split between the two nodes with the least change of kinetic energy
 (paired_rigid_contact). The node-wise projection holds the lower node itself to the body, so
 a layer of A up to a cell thick moves with R and the contact force rings with one cell's
 period as R's surface crosses node rows (the footing sawtooth of docs/guide/choosing.md).
-With it (and with interface="coverage"), a Dirichlet-fixed velocity component (a roller: a
+With it (and wherever the coverage acts), a Dirichlet-fixed velocity component (a roller: a
 symmetry plane) is taken out of the mass gradients before the normals are formed: on a half
 model's symmetry line the mass-gradient normal is otherwise diagonal and the roller then
 keeps only half of the normal correction (and the coverage would count the body's inside as
-a neighbour along its surface).
+a neighbour along its surface). interface="node" keeps the diagonal normal: its half model
+of Prandtl's footing reads 1.164 / 1.031 (2 + pi) c_u at 2 / 5 cells under B/2, the whole
+footing 1.374 / 1.116 (problems.footing.strip_footing(half=False), 2026-12-07).
 
-Coverage interface (interface="coverage", multi-velocity with a rigid body and the gap check,
-on axis-aligned lattices; an option, measured in docs/guide/contact.md): the node-wise
-projection against a rigid body R, each correction of node i (normal and friction) scaled by
-R's coverage of the node,
+Coverage interface (interface="coverage"; the default interface="auto" takes it against every
+rigid body whose particle domains fill an axis-aligned box, and "node" against the others;
+multi-velocity with the gap check on axis-aligned lattices; measured in
+docs/guide/contact.md): the node-wise projection against a rigid body R, each correction of
+node i (normal and friction) scaled by R's coverage of the node,
     alpha_i = rho_i / max(rho_i, rho_j over i's lattice neighbours j along R's surface),
     rho_i = m^R_i / V_i  (V_i the node's tributary volume: h^d, halved per grid boundary
     crossing it, times r for axisymmetric grids, h_r / 3 on the axis),
@@ -124,13 +127,18 @@ so a node that R covers fully (its neighbours along R's surface carry as much of
 as before, and a node at R's edge is held in proportion to the part of its cell patch that R
 covers. By the partition of unity, sum_i alpha_i V_i along a row of nodes is about R's own
 extent along its surface, so the constrained band of A is as wide as R instead of half a cell
-wider (a jacked pile's resistance then converges: docs/guide/contact.md). The neighbours "along R's surface" are,
-where the node's normal lies within 18 degrees of a grid axis (a face), those along the other
-axes, and elsewhere (a corner: the pile's tip edge) all lattice neighbours. For bodies with
-axis-aligned faces (footings, piles, walls): on an inclined rigid surface a node's neighbour
-inside the body makes alpha_i about 1/2 and the body is held too little (use "node" there;
-only holding the faces' neighbours at a corner, alpha_i = 1 elsewhere, left the jacked pile
-12 % apart between h = 0.075 and 0.0375 m, against 0.6 % with this rule).
+wider: a jacked pile's resistance converges in h, and Prandtl's footing, half model or whole,
+comes within 3 % at 10 cells under B/2 (docs/guide/contact.md). The neighbours "along R's
+surface" are, where the node's normal lies within 18 degrees of a grid axis (a face), those
+along the other axes, and elsewhere (a corner: the pile's tip edge) all lattice neighbours.
+On an inclined face a node's neighbour inside R makes alpha_i about 1/2, and at a sharp tip
+the half-held nodes let A in (a rigid 30 degree V wedge pushed 0.2 m into a block at h = 0.05
+m: the soil 53.9 mm inside it, node-wise 8.4 mm clear; tests/test_coverage_contact.py),
+hence "auto"'s boxes (only holding the faces' neighbours at a corner, alpha_i = 1 elsewhere,
+left the jacked pile 12 % apart between h = 0.075 and 0.0375 m, against 0.6 % with this rule;
+taking as neighbours along R's surface those no deeper in R than the node, or telling corners
+from inclined faces by the neighbours' normals, moved the pile's 0.30-0.45 m mean at h =
+0.075 m by +22 % / +15 % and failed the rough footing test, 2026-12-07).
 
 Frictional rigid boundaries of the simulation (add_friction) act on every body's field. Robin
 boundaries (absorbing dashpots, sim.add_boundary) act on the centre-of-mass nodal velocity
@@ -155,7 +163,8 @@ __all__ = ["ExplicitContact", "set_body", "body_ids"]
 ALGORITHMS = ("multi-velocity", "penalty")
 LATERAL = 1.5           # gap check: particles within LATERAL half-sizes of a node's normal line
 NORMALS = ("average", "max-gradient")
-INTERFACES = ("node", "paired", "coverage")
+INTERFACES = ("auto", "node", "paired", "coverage")
+BOX_TOL = 1e-6          # interface "auto": a rigid body's domains fill its bounding box to this
 ALIGNED = 0.95          # an axis within 18 deg of the normal (interfaces "paired", "coverage")
 
 
@@ -694,8 +703,10 @@ class ExplicitContact:
     or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
-    interface: "node" (default: against a rigid body every shared node is projected alone),
-    "paired" (one constraint per pair of nodes across a rigid body's surface on axis-aligned
+    interface: "auto" (default: "coverage" against every rigid body whose particle domains
+    fill an axis-aligned box, a footing, pile or wall, on an axis-aligned lattice, and "node"
+    elsewhere; module docstring "Coverage interface"), "node" (against a rigid body every
+    shared node is projected alone), "paired" (one constraint per pair of nodes across a rigid body's surface on axis-aligned
     lattices, paired_rigid_contact; module docstring "Paired interface") or "coverage" (the
     node-wise projection scaled by the rigid body's coverage of each node; module docstring
     "Coverage interface"); multi-velocity only.
@@ -711,7 +722,7 @@ class ExplicitContact:
 
     def __init__(self, scheme="MUSL", mu=0.0, algorithm="multi-velocity", flip=1.0,
                  rigid=None, mu_default=0.0, normal="max-gradient", gap=0.0, penalty=None,
-                 interface="node"):
+                 interface="auto"):
         scheme = str(scheme).upper()
         if interface not in INTERFACES:
             raise ValueError(f"ExplicitContact: 'interface' must be one of {INTERFACES}, got "
@@ -776,6 +787,7 @@ class ExplicitContact:
             self.k_n, self.k_t, self.damping = float(kn), float(kt_), float(zeta)
         self.polylines = []
         self._penalty = None
+        self._boxes = None
         self.penalty_stats = None
         self.nb = None
         self.body_contact_force = None
@@ -803,6 +815,7 @@ class ExplicitContact:
                 raise NotImplementedError("ExplicitContact: penalty contact is 2D only")
         self.nb = None
         self._penalty = None
+        self._boxes = None
 
     def checkpoint_state(self):
         """Replicated arrays a checkpoint keeps (fenicsmpm.checkpoint): the velocity of every
@@ -940,22 +953,64 @@ class ExplicitContact:
                     v_b[:, b, :] *= free
 
     def _uses(self, interface, grid):
-        """Whether `interface` ("paired", "coverage") acts this step: it is the chosen one,
-        there is a rigid body, the gap check is on and the grid is an axis-aligned lattice
-        (else the node-wise projection everywhere)."""
-        return (self.interface == interface and bool(self.rigid) and self._gap < 1e300
-                and grid.structured)
+        """Whether `interface` ("paired", "coverage") can act: it is the chosen one ("auto"
+        chooses "coverage"), there is a rigid body, the gap check is on and the grid is an
+        axis-aligned lattice (else the node-wise projection everywhere)."""
+        chosen = "coverage" if self.interface == "auto" else self.interface
+        return (chosen == interface and bool(self.rigid) and self.gap is not None
+                and self.algorithm == "multi-velocity" and grid.structured)
+
+    def _covered(self, sim):
+        """The rigid bodies whose corrections are scaled by their coverage (_coverage): all of
+        them with interface="coverage", with "auto" those whose particle domains fill an
+        axis-aligned box (the domains' summed size equals their bounding box's to BOX_TOL; on
+        axisymmetric grids in the meridian plane; decided at the first step, collective);
+        none where the interface does not act (_uses)."""
+        if not self._uses("coverage", sim.grid):
+            return ()
+        if self.interface == "coverage":
+            return tuple(self.rigid)
+        if self._boxes is None:
+            p, d = sim.particles, sim.gdim
+            body = body_ids(p)
+            size = p.V / p.x[:, 0] if sim.axisymmetric else p.V
+            half = 0.5 * np.abs(size) ** (1.0 / d)
+            ids = sorted(self.rigid)
+            local = []
+            for b in ids:
+                sel = body == b
+                local.append((np.min(p.x[sel, :d] - half[sel, None], axis=0, initial=np.inf),
+                              np.max(p.x[sel, :d] + half[sel, None], axis=0, initial=-np.inf),
+                              float(size[sel].sum())))
+            every = sim.comm.allgather(local) if sim.comm.size > 1 else [local]
+            boxes = []
+            for k, b in enumerate(ids):
+                lo = np.min([r[k][0] for r in every], axis=0)
+                hi = np.max([r[k][1] for r in every], axis=0)
+                box = float(np.prod(hi - lo)) if np.all(hi > lo) else 0.0
+                if box > 0.0 and abs(sum(r[k][2] for r in every) - box) <= BOX_TOL * box:
+                    boxes.append(b)
+            self._boxes = tuple(boxes)
+        return self._boxes
 
     def _lattice(self, grid):
         """(nbr, spacing, V): the grid's lattice neighbours (lattice_neighbours), spacing and
-        the nodes' tributary volumes (h^d, halved per grid boundary through the node; times r
-        on axisymmetric grids, h_r / 3 on the axis), rebuilt with the grid's nodes."""
+        the nodes' tributary volumes (h^d, halved per boundary of the global grid through the
+        node; times r on axisymmetric grids, h_r / 3 on the axis), rebuilt with the grid's
+        nodes (collective)."""
         if getattr(self, "_lattice_of", None) is not grid.node_x:     # a rebuilt grid: again
             nbr = lattice_neighbours(grid)
             sp = np.asarray(grid._structured["spacing_global"], dtype=np.float64)
+            lo = np.asarray(grid._structured["origin_global"], dtype=np.float64)
+            x = grid.node_x[:, :grid.gdim]
             vol = np.ones(len(nbr))
-            for k in range(grid.gdim):
-                inner = (nbr[:, 2 * k] >= 0) & (nbr[:, 2 * k + 1] >= 0)
+            for k in range(grid.gdim):        # the global grid's boundary (a ghost node's
+                top = x[:, k].max(initial=-np.inf)     # neighbours may lie off this rank)
+                if grid.comm.size > 1:
+                    from mpi4py import MPI
+                    top = grid.comm.allreduce(top, op=MPI.MAX)
+                tol = 1e-9 * sp[k]
+                inner = (x[:, k] > lo[k] + tol) & (x[:, k] < top - tol)
                 vol *= np.where(inner, sp[k], 0.5 * sp[k])
             if grid.axisymmetric:
                 r = grid.node_x[:, 0]
@@ -969,14 +1024,15 @@ class ExplicitContact:
         the owned nodes and copied to the ghosts."""
         grid = sim.grid
         n, nb = self._m_b.shape
-        if not self._uses("coverage", grid):
+        bodies = self._covered(sim)
+        if not bodies:
             if getattr(self, "_ones", None) is None or self._ones.shape != (n, nb):
                 self._ones = np.ones((n, nb))
             return self._ones
         nbr, _, vol = self._lattice(grid)
         cover = np.ones((n, nb))
         along = np.abs(self._ref_n) < ALIGNED        # axes along R's surface at each node
-        for b in self.rigid:
+        for b in bodies:
             rho = self._m_b[:, b] / vol
             full = rho.copy()
             for k in range(sim.gdim):
@@ -1106,7 +1162,8 @@ class ExplicitContact:
             mtol = sim.comm.allreduce(mtol, op=MPI.MAX)
         present = m_b > mtol
         kt.restrict_gradients(D, sim.nodes, sim.N, sim.dN, present, body)   # per body
-        if self.interface != "node" and sim.fixed.any():     # a roller is a mirror plane:
+        lattice = self._uses("paired", grid) or bool(self._covered(sim))
+        if lattice and sim.fixed.any():                         # a roller is a mirror plane:
             gm_b = gm_b * (~sim.fixed)[:, None, :]             # no normal across it
         self._present, self._m_b, self._gm_b = present, m_b, gm_b
         self._gap_extents(sim, body)

@@ -45,7 +45,7 @@ def limit_pressure(soil):
 
 def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, scheme="MUSL",
                   shape="auto", fbar=None, mu=0.0, soil=None, room=None, comm=None,
-                  algorithm="multi-velocity", interface="node"):
+                  algorithm="multi-velocity", interface="auto", half=True):
     """The scene: (sim, pressure, settlement): pressure() -> q / limit_pressure(soil) of the
     last step (from the global contact force; the same on every rank), settlement(t) the
     footing's prescribed settlement [m]. fbar: the Simulation option (None: the library
@@ -56,23 +56,28 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
     ("penalty": node-to-segment with k_n = rho c_p^2 / h of the soil, the soil surface and
     the footing's outline as polylines, vertices h/2 apart); interface: fm.ExplicitContact's
     ("paired": one constraint per node pair across the footing's base; "coverage": edge nodes
-    held in proportion to the footing's coverage of them)."""
+    held in proportion to the footing's coverage of them); half: the half model (the symmetry
+    line x = 0 a roller), or with half=False the whole footing, B wide, in the middle of a
+    soil body 2 width wide (no symmetry line)."""
     from dolfinx import mesh
     from mpi4py import MPI
     import fenicsmpm as fm
     if room is not None and not room > 0.0:
         raise ValueError(f"strip_footing: 'room' must be > 0 (metres of empty cells), got {room!r}")
     comm = MPI.COMM_WORLD if comm is None else comm
-    nx = int(round(width / h))
+    span = width if half else 2.0 * width
+    mid = 0.0 if half else width
+    nx = int(round(span / h))
     ny = int(round(depth / h)) + (3 if room is None else int(math.ceil(room / h - 1e-9)))
-    msh = mesh.create_rectangle(comm, [[0.0, 0.0], [width, ny * h]], [nx, ny],
+    msh = mesh.create_rectangle(comm, [[0.0, 0.0], [span, ny * h]], [nx, ny],
                                 mesh.CellType.quadrilateral)
     grid = fm.Grid(msh)
     soil = tresca_soil(nu) if soil is None else soil
     q_limit = limit_pressure(soil)
     pts = fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < depth)
     pts = pts + fm.Particles.fill(grid, fm.LinearElastic(E=10e6, nu=0.3, density=1800.0),
-                                  per_cell=2, region=lambda x: (x[:, 0] < B2) & (x[:, 1] > depth)
+                                  per_cell=2, region=lambda x: (np.abs(x[:, 0] - mid) < B2)
+                                  & (x[:, 1] > depth)
                                   & (x[:, 1] < depth + 2 * h))
     speed = speed_factor * soil.s_wave_speed
     ramp = 0.25 * h / speed
@@ -87,6 +92,8 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
 
     kw = {} if fbar is None else dict(fbar=fbar)
     if algorithm == "penalty":
+        if not half:
+            raise ValueError("strip_footing: algorithm='penalty' needs the half model (half=True)")
         from ..contact.penalty import line, rectangle
         integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity}, algorithm="penalty",
                                    penalty=dict(k_n=soil.density * soil.p_wave_speed ** 2 / h))
@@ -96,11 +103,11 @@ def strip_footing(h=0.1, nu=0.49, width=5.0, depth=3.0, speed_factor=2e-3, schem
         integ = fm.ExplicitContact(scheme, mu=mu, rigid={1: velocity}, algorithm=algorithm,
                                    interface=interface)
     sim = fm.Simulation(grid, pts, integ, dt="auto", shape=shape, **kw)
-    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], width), [0])
+    sim.fix(lambda x: np.isclose(x[:, 0], 0.0) | np.isclose(x[:, 0], span), [0])
     sim.fix(lambda x: np.isclose(x[:, 1], 0.0))
 
     def pressure():
-        return np.asarray(integ.body_contact_force)[1][1] / B2 / q_limit
+        return np.asarray(integ.body_contact_force)[1][1] / (B2 if half else 2.0 * B2) / q_limit
     return sim, pressure, settlement
 
 
