@@ -116,6 +116,29 @@ def wedge(h=0.1, interface=None, c=comm, theta=30.0, push=0.2):
     return c.allreduce(float(depth.max(initial=-1.0)), op=MPI.MAX)
 
 
+def test_auto_takes_boxes_on_cells_of_any_aspect_ratio():
+    """interface="auto" scales the corrections against a rigid box by its coverage also on
+    cells of unequal spacings (0.1 x 0.05 m: the particle domains are boxes of the cell's
+    aspect ratio, as Particles.fill makes them), not against a rigid wedge there."""
+    from dolfinx import mesh
+    import fenicsmpm as fm
+    msh = mesh.create_rectangle(comm, [[0, 0], [2.0, 1.6]], [20, 32], mesh.CellType.quadrilateral)
+    grid = fm.Grid(msh)
+    chosen = []
+    for wedge_shaped in (False, True):
+        soil, rigid = (fm.LinearElastic(E=1e6, nu=0.3, density=1000.0) for _ in range(2))
+        body = ((lambda x: (x[:, 1] > 0.8 + np.abs(x[:, 0] - 1.0) * 0.5) & (x[:, 1] < 1.4))
+                if wedge_shaped else (lambda x: (x[:, 1] > 0.8) & (x[:, 1] < 1.2)
+                                      & (np.abs(x[:, 0] - 1.0) < 0.3)))
+        p = (fm.Particles.fill(grid, soil, per_cell=2, region=lambda x: x[:, 1] < 0.8)
+             + fm.Particles.fill(grid, rigid, per_cell=2, region=body))
+        sim = fm.Simulation(grid, p, fm.ExplicitContact("MUSL", rigid={1: (0.0, -0.1)}),
+                            dt="auto")
+        sim.run(steps=1, progress=False)
+        chosen.append(sim.integrator._covered(sim))
+    assert chosen == [(1,), ()], chosen
+
+
 def test_wedge_default_interface_keeps_the_soil_out():
     deepest = wedge()
     print(f"\nrigid 30 deg wedge, default interface: deepest soil domain {1e3 * deepest:+.1f} mm")

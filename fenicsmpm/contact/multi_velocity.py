@@ -963,8 +963,10 @@ class ExplicitContact:
     def _covered(self, sim):
         """The rigid bodies whose corrections are scaled by their coverage (_coverage): all of
         them with interface="coverage", with "auto" those whose particle domains fill an
-        axis-aligned box (the domains' summed size equals their bounding box's to BOX_TOL; on
-        axisymmetric grids in the meridian plane; decided at the first step, collective);
+        axis-aligned box (the domains, boxes of the cell's aspect ratio and the particle's
+        volume as shapes.gimp.initial_half_widths makes them, summed equal their bounding
+        box to BOX_TOL; on axisymmetric grids in the meridian plane; decided at the first
+        step, collective);
         none where the interface does not act (_uses)."""
         if not self._uses("coverage", sim.grid):
             return ()
@@ -974,13 +976,14 @@ class ExplicitContact:
             p, d = sim.particles, sim.gdim
             body = body_ids(p)
             size = p.V / p.x[:, 0] if sim.axisymmetric else p.V
-            half = 0.5 * np.abs(size) ** (1.0 / d)
+            L = np.asarray(sim.grid._structured["spacing_global"], dtype=np.float64)[:d]
+            half = 0.5 * (np.abs(size)[:, None] / np.prod(L)) ** (1.0 / d) * L   # cell's aspect
             ids = sorted(self.rigid)
             local = []
             for b in ids:
                 sel = body == b
-                local.append((np.min(p.x[sel, :d] - half[sel, None], axis=0, initial=np.inf),
-                              np.max(p.x[sel, :d] + half[sel, None], axis=0, initial=-np.inf),
+                local.append((np.min(p.x[sel, :d] - half[sel], axis=0, initial=np.inf),
+                              np.max(p.x[sel, :d] + half[sel], axis=0, initial=-np.inf),
                               float(size[sel].sum())))
             every = sim.comm.allgather(local) if sim.comm.size > 1 else [local]
             boxes = []
