@@ -72,6 +72,13 @@ Re-run 2026-12-06 (`--h H --blows 1 [--shape cpgimp]`, serial): standard family 
 default for hypoplastic sand) -0.006 / 0.662 m at h = 0.3 / 0.15 m (18 / 114 s wall), cpGIMP
 -0.014 / 0.815 m (19 / 141 s); --quick 0.627 / 0.400 m standard, 0.562 / 0.350 m cpGIMP
 (21 / 20 s).
+Since 2026-12-07 the contact takes the rollers of the axis out of its normals
+(contact.multi_velocity, "Rollers out of the normals"; before, the axis nodes' normal was
+diagonal and the roller kept part of the correction): `--h 0.3 / 0.15 --blows 1` -0.050 /
+0.624 m (17 / 110 s; pile-head settlement after the settling 0.009 / 0.019 m, first-blow peak
+resistance 126.6 / 102.7 kN), --quick 0.391 / 0.082 m, 201.9 / 127.9 kN, settlement after
+gravity 0.050 m, base sigma_zz -259.9 kPa against -258.1, void ratio near the tip down to
+0.569 (28 s wall beside another run).
 NOT converged: the two finest sizes differ by far more than 5 %, with either family. With the
 pile a quarter, half or one cell wide the contact is not resolved; h = 0.075 m (4x the
 particles, 2x the steps: ~40 min CPU a blow here) was not run.
