@@ -78,7 +78,9 @@ diagonal and the roller kept part of the correction): `--h 0.3 / 0.15 --blows 1`
 0.624 m (17 / 110 s; pile-head settlement after the settling 0.009 / 0.019 m, first-blow peak
 resistance 126.6 / 102.7 kN), --quick 0.391 / 0.082 m, 201.9 / 127.9 kN, settlement after
 gravity 0.050 m, base sigma_zz -259.9 kPa against -258.1, void ratio near the tip down to
-0.569 (28 s wall beside another run).
+0.569 (28 s wall beside another run); `--h 0.075 --blows 1` 0.888 m (36,307 particles,
+18,093 steps, 912 s wall beside another run; peak resistance 297.6 kN): the first-blow
+penetration grows under refinement (-0.050 / 0.624 / 0.888 m at h = 0.3 / 0.15 / 0.075 m).
 NOT converged: the two finest sizes differ by far more than 5 %, with either family. With the
 pile a quarter, half or one cell wide the contact is not resolved; h = 0.075 m (4x the
 particles, 2x the steps: ~40 min CPU a blow here) was not run.

@@ -29,7 +29,8 @@ the footing is exactly B/2 wide (with its edge on a grid line, the rigid footing
 reaches the nodes of that line, half a cell beyond B/2: contact.multi_velocity's gap check).
 Rows h<h_i>-paired-centred and h<h_i>-mc20-paired-centred (full run only): the centred and
 mc20-centred rows with fm.ExplicitContact(interface="paired") (one constraint per node pair
-across the footing's base, contact.multi_velocity's "Paired interface").
+across the footing's base, scaled by the footing's coverage, contact.multi_velocity's "Paired
+interface"); h<h>-paired (full run only): the default row with it (the edge on a grid line).
 
 The explicit rows take fm.ExplicitContact's default interface="auto": against the footing (an
 axis-aligned box of particles) the node-wise projection scaled by the footing's coverage of
@@ -97,9 +98,10 @@ ROWS = (("default", "auto", "auto", {}, PUSH),
         ("nu0.3-node", "auto", "auto", dict(nu=0.3, interface="node"), PUSH),
         ("rough-node", "auto", "auto", dict(mu=10.0, interface="node"), PUSH),
         ("mc20-node", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0,
-                                           interface="node"), MC_PUSH))
+                                           interface="node"), MC_PUSH),
+        ("paired", "auto", "auto", dict(interface="paired"), PUSH))
 COARSE_ONLY = ("mpm-fbar-off", "mc30-mpm")     # rows run at h >= 0.1 only
-FULL_ONLY = ("mc20-node",)     # not in the quick run
+FULL_ONLY = ("mc20-node", "paired")     # not in the quick run
 # the defaults with the footing's edge at a cell centre (implicit_cell_size: B/2 exactly);
 # name, strip_footing options, in the quick run too, (t_end, plateau from)
 CENTRED_ROWS = (("centred", {}, False, PUSH), ("rough-centred", dict(mu=10.0), True, PUSH),

@@ -107,6 +107,15 @@ approach, split between the two nodes with the least change of kinetic energy
 (paired_rigid_contact). The node-wise projection holds the lower node itself to the body, so
 a layer of A up to a cell thick moves with R and the contact force rings with one cell's
 period as R's surface crosses node rows (the footing sawtooth of docs/guide/choosing.md).
+Since 2026-12-07 each pair's impulse and friction are scaled by R's coverage of the pair's
+R-side node where R is an axis-aligned box (the coverage interface below; nodes without a
+pair get the node-wise projection scaled the same way), so R no longer acts half a cell
+wider when its edge lies on a grid line: Prandtl's footing (bench bearing-capacity's
+_row(h, ..., interface="paired")) reads 1.133 / 0.9775 / 0.9826 (2 + pi) c_u at 2 / 5 / 10
+cells under B/2 with its edge on a grid line (coverage: 1.3416 / 1.0120 / 1.0265) and
+0.957 / 0.9964 / 1.0014 at 2.5 / 5.5 / 10.5 cells with its edge at a cell centre (paired
+without the coverage 0.964 / 1.008 / 1.004; coverage 1.1105 / 1.0599 / 1.0321), the
+plateau's 0.1 s windows within 0.021 / 0.020 at 10 / 10.5 cells (coverage 0.10 / 0.077).
 Rollers out of the normals (every multi-velocity interface but an explicit "node"): a
 Dirichlet-fixed velocity component (a roller: a symmetry plane, the axis of an axisymmetric
 grid) is taken out of the mass gradients before the normals are formed, so the contact acts
@@ -532,7 +541,7 @@ def _pair_apply(i, w, lam, A, n, m_b, v_b, fc, dt, d):
 @njit(cache=True)
 def paired_rigid_contact(cand, body_a, body_r, present, m_b, gm_b, mu, mode, n_fixed, has_fixed,
                          ref_n, lo_b, hi_b, node_x, nbr, spacing, surf_tol, gap_tol, dt, v_b, fc,
-                         status, hold):
+                         status, hold, cover):
     """Contact of a deformable body A with a rigid body R at the nodes cand[i] (one of each
     there, both present, the gap check's normal line through i meeting R), as one constraint
     per pair of nodes across R's surface instead of one per node (interface="paired").
@@ -547,7 +556,9 @@ def paired_rigid_contact(cand, body_a, body_r, present, m_b, gm_b, mu, mode, n_f
     nodes to the body, so a soil layer xi spacing_k thick moved with a footing and the
     reaction rang with one cell's period as the base crossed node rows. A node without such a
     partner is constrained alone (w = 1). Friction (mu[A, R]) acts at the R-side node as in
-    the node-wise projection. Status and hold as in multi_velocity_contact."""
+    the node-wise projection. Status and hold as in multi_velocity_contact. cover[i, R]: the
+    factor of the pair's impulse and friction, taken at its R-side node (the partner, or i
+    alone; ExplicitContact._coverage: R's coverage, or 1)."""
     n_nodes, nb, d = v_b.shape
     G = np.empty(d)
     nrm = np.empty(d)
@@ -614,6 +625,8 @@ def paired_rigid_contact(cand, body_a, body_r, present, m_b, gm_b, mu, mode, n_f
             if partner >= 0:
                 S += wa * wa / m_b[partner, A]
             lam = -(dvn - allowed) / S
+            al = cover[partner if partner >= 0 else i, R]
+            lam *= al
             _pair_apply(i, wb, lam, A, nrm, m_b, v_b, fc, dt, d)
             _pair_apply(partner, wa, lam, A, nrm, m_b, v_b, fc, dt, d)
             if hold and not keep:
@@ -640,7 +653,7 @@ def paired_rigid_contact(cand, body_a, body_r, present, m_b, gm_b, mu, mode, n_f
                     c = 1.0 if tn <= mu[A, R] * imp else mu[A, R] * imp / tn
                     status[fr, A] = 2 if c == 1.0 else 1
                 for k in range(d):
-                    dv = -c * t[k]
+                    dv = -c * al * t[k]
                     v_b[fr, A, k] += dv
                     fc[fr, A, k] += m_b[fr, A] * dv / dt
 
@@ -713,8 +726,9 @@ class ExplicitContact:
     elsewhere, with the rollers taken out of the normals; module docstring "Coverage
     interface"), "node" (against a rigid body every shared node is projected alone, the
     normals as the mass gradients make them), "paired" (one constraint per pair of nodes
-    across a rigid body's surface on axis-aligned lattices, paired_rigid_contact; module docstring "Paired interface") or "coverage" (the
-    node-wise projection scaled by the rigid body's coverage of each node; module docstring
+    across a rigid body's surface on axis-aligned lattices, scaled by the coverage against
+    box-shaped bodies, paired_rigid_contact; module docstring "Paired interface") or
+    "coverage" (the node-wise projection scaled by the rigid body's coverage of each node; module docstring
     "Coverage interface"); multi-velocity only.
     algorithm="penalty": penalty=dict(k_n=..., k_t=..., damping=...) (> 0, >= 0 and >= 0;
     force per unit length per unit penetration/slip, k_t defaults to k_n, about (K + 4G/3)/h
@@ -949,7 +963,7 @@ class ExplicitContact:
                                      self._mu, self._mode, self._n_fixed, self._has_fixed,
                                      self._ref_n, self._lo_b, self._hi_b, sim.grid.node_x, nbr,
                                      spacing, 1e-9 * sim.grid.h, self._gap, dt, v_b, fc,
-                                     self._status, not trial)
+                                     self._status, not trial, self._cover)
                 sim.grid.update_ghosts(v_b.reshape(v_b.shape[0], -1))
         self._friction(sim, v_b, dt, "apply" if trial else "hold")
         if sim.fixed.any():
@@ -972,9 +986,9 @@ class ExplicitContact:
         axis-aligned box (the domains, boxes of the cell's aspect ratio and the particle's
         volume as shapes.gimp.initial_half_widths makes them, summed equal their bounding
         box to BOX_TOL; on axisymmetric grids in the meridian plane; decided at the first
-        step, collective);
-        none where the interface does not act (_uses)."""
-        if not self._uses("coverage", sim.grid):
+        step, collective); with "paired" those boxes too (the pairs' impulses scaled by the
+        coverage of their R-side node); none where the interface does not act (_uses)."""
+        if not (self._uses("coverage", sim.grid) or self._uses("paired", sim.grid)):
             return ()
         if self.interface == "coverage":
             return tuple(self.rigid)
