@@ -728,8 +728,8 @@ class ExplicitContact:
     normals as the mass gradients make them), "paired" (one constraint per pair of nodes
     across a rigid body's surface on axis-aligned lattices, scaled by the coverage against
     box-shaped bodies, paired_rigid_contact; module docstring "Paired interface") or
-    "coverage" (the node-wise projection scaled by the rigid body's coverage of each node; module docstring
-    "Coverage interface"); multi-velocity only.
+    "coverage" (the node-wise projection scaled by the rigid body's coverage of each node;
+    module docstring "Coverage interface"); multi-velocity only.
     algorithm="penalty": penalty=dict(k_n=..., k_t=..., damping=...) (> 0, >= 0 and >= 0;
     force per unit length per unit penetration/slip, k_t defaults to k_n, about (K + 4G/3)/h
     of the stiffer body; damping the normal dashpot's ratio to critical, default 0.1),
