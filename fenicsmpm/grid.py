@@ -161,20 +161,23 @@ class Grid:
 
     def _global_lattice(self):
         """The structured lattice's global lower corner and spacing (`origin_global`,
-        `spacing_global`: the minima over ranks) and the global index of this rank's first box
+        `spacing_global`: the minima over ranks), its global upper corner (`upper_global`, the
+        maximum of the ranks' largest node coordinates) and the global index of this rank's first box
         (`first`), for locate: with its own corner and spacing each rank computed its own
         (x - origin) / spacing, and a point on a grid line between two ranks could fall in the
         ghost box on both (penalty polylines along a rank boundary were then located by
         neither, and the contact lost). Collective."""
         s = self._structured
-        mine = (np.concatenate([s["origin"], s["spacing"]]) if s is not None
-                else np.full(2 * self.gdim, np.inf))
+        mine = (np.concatenate([s["origin"], s["spacing"], -self.node_x.max(axis=0)])
+                if s is not None else np.full(3 * self.gdim, np.inf))
         g = np.array(mine, dtype=np.float64)
         if self.comm.size > 1:                  # the spacing too: each rank measured its own
             from mpi4py import MPI
             self.comm.Allreduce(np.ascontiguousarray(mine, dtype=np.float64), g, op=MPI.MIN)
         if s is not None:
-            s["origin_global"], s["spacing_global"] = g[: self.gdim], g[self.gdim:]
+            d = self.gdim
+            s["origin_global"], s["spacing_global"] = g[:d], g[d: 2 * d]
+            s["upper_global"] = -g[2 * d:]
             s["first"] = np.rint((s["origin"] - s["origin_global"])
                                  / s["spacing_global"]).astype(np.int64)
 

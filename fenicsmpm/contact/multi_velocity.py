@@ -999,21 +999,18 @@ class ExplicitContact:
             L = np.asarray(sim.grid._structured["spacing_global"], dtype=np.float64)[:d]
             half = 0.5 * (np.abs(size)[:, None] / np.prod(L)) ** (1.0 / d) * L   # cell's aspect
             ids = sorted(self.rigid)
-            local = []
-            for b in ids:
-                sel = body == b
-                local.append((np.min(p.x[sel, :d] - half[sel], axis=0, initial=np.inf),
-                              np.max(p.x[sel, :d] + half[sel], axis=0, initial=-np.inf),
-                              float(size[sel].sum())))
-            every = sim.comm.allgather(local) if sim.comm.size > 1 else [local]
-            boxes = []
-            for k, b in enumerate(ids):
-                lo = np.min([r[k][0] for r in every], axis=0)
-                hi = np.max([r[k][1] for r in every], axis=0)
-                box = float(np.prod(hi - lo)) if np.all(hi > lo) else 0.0
-                if box > 0.0 and abs(sum(r[k][2] for r in every) - box) <= BOX_TOL * box:
-                    boxes.append(b)
-            self._boxes = tuple(boxes)
+            lo = np.array([np.min(p.x[body == b, :d] - half[body == b], axis=0, initial=np.inf)
+                           for b in ids])
+            hi = np.array([np.max(p.x[body == b, :d] + half[body == b], axis=0, initial=-np.inf)
+                           for b in ids])
+            total = np.array([size[body == b].sum() for b in ids])
+            if sim.comm.size > 1:
+                from mpi4py import MPI
+                for a, op in ((lo, MPI.MIN), (hi, MPI.MAX), (total, MPI.SUM)):
+                    sim.comm.Allreduce(MPI.IN_PLACE, a, op=op)
+            box = np.where(np.all(hi > lo, axis=1), np.prod(hi - lo, axis=1), 0.0)
+            self._boxes = tuple(b for b, v, s in zip(ids, box, total)
+                                if v > 0.0 and abs(s - v) <= BOX_TOL * v)
         return self._boxes
 
     def _lattice(self, grid):
@@ -1025,15 +1022,12 @@ class ExplicitContact:
             nbr = lattice_neighbours(grid)
             sp = np.asarray(grid._structured["spacing_global"], dtype=np.float64)
             lo = np.asarray(grid._structured["origin_global"], dtype=np.float64)
+            top = np.asarray(grid._structured["upper_global"], dtype=np.float64)
             x = grid.node_x[:, :grid.gdim]
             vol = np.ones(len(nbr))
             for k in range(grid.gdim):        # the global grid's boundary (a ghost node's
-                top = x[:, k].max(initial=-np.inf)     # neighbours may lie off this rank)
-                if grid.comm.size > 1:
-                    from mpi4py import MPI
-                    top = grid.comm.allreduce(top, op=MPI.MAX)
-                tol = 1e-9 * sp[k]
-                inner = (x[:, k] > lo[k] + tol) & (x[:, k] < top - tol)
+                tol = 1e-9 * sp[k]            # neighbours may lie off this rank)
+                inner = (x[:, k] > lo[k] + tol) & (x[:, k] < top[k] - tol)
                 vol *= np.where(inner, sp[k], 0.5 * sp[k])
             if grid.axisymmetric:
                 r = grid.node_x[:, 0]
