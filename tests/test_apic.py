@@ -73,7 +73,7 @@ def test_apic_transfers_an_affine_field_exactly():
 
 def test_transfer_input_validation():
     with pytest.raises(ValueError, match="'transfer' must be one of"):
-        fm.Explicit("MUSL", transfer="xpic")
+        fm.Explicit("MUSL", transfer="tpic")
     with pytest.raises(ValueError, match="'flip' applies to transfer='flip' or 'aflip'"):
         fm.Explicit("MUSL", flip=0.5, transfer="apic")
     assert fm.Explicit("MUSL", flip=0.5, transfer="aflip").flip == 0.5

@@ -1,4 +1,5 @@
-"""Benchmark case `transfer`: the velocity transfer, FLIP against APIC and AFLIP (issue 15 item 2).
+"""Benchmark case `transfer`: the velocity transfer, FLIP against APIC, AFLIP and XPIC(2) (issue 15
+item 2).
 
     python -m fenicsmpm.bench transfer [--quick] [--out DIR]
 
@@ -11,8 +12,8 @@ Rows (explicit, default shape="auto": cpGIMP on these lattices):
   discs-SCHEME-TRANSFER   the colliding discs (BENCHMARKS L2, problems.elastic.colliding_discs,
                           cfl 0.2, to t = 3.5 s; 20 x 20 cells, quick 10 x 10). Known answer:
                           the total energy E = K + strain is conserved. Metric: E_error.
-SCHEME: MUSL and AVG; TRANSFER: flip, apic and aflip (affine FLIP). Writes out/transfer.json
-and out/transfer.png (|error| per row and problem)."""
+SCHEME: MUSL and AVG; TRANSFER: flip, apic, aflip (affine FLIP) and xpic (XPIC(2), Hammerquist &
+Nairn 2017). Writes out/transfer.json and out/transfer.png (|error| per row and problem)."""
 import os
 import time
 
@@ -21,7 +22,7 @@ import numpy as np
 from . import common
 
 CASE = "transfer"
-ROWS = [(s, t) for t in ("flip", "apic", "aflip") for s in ("MUSL", "AVG")]
+ROWS = [(s, t) for t in ("flip", "apic", "aflip", "xpic") for s in ("MUSL", "AVG")]
 
 
 def _energy(sim):

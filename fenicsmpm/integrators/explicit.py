@@ -22,7 +22,14 @@ Velocity transfer (`transfer`):
     "aflip": the affine FLIP of Fei et al. 2021: APIC's C_p and affine P2G with FLIP's
             velocity increment (blended with PIC by `flip`), so the non-affine motion is not
             damped as by APIC (colliding discs: energy -3.0 % against -15.5 %; FLIP -0.31 %)
-            while a rigid rotation keeps its angular momentum (bench transfer)."""
+            while a rigid rotation keeps its angular momentum (bench transfer);
+    "xpic": XPIC(m) of Hammerquist & Nairn 2017 (m = `xpic_order`): with S the grid-to-particle
+            interpolation, S+ the mass-weighted particle-to-grid map and Q = S+ S,
+                v* = sum_{k=1}^{m} (-1)^(k+1) C(m, k) Q^(k-1) v^L,   v^L = S+ v_p^n,
+                v_p^(n+1) = S (v^(n+1) - v^L + v*)     (on free components),
+            i.e. FLIP with (I - S S+)^m v_p^n taken off: the part of the particle velocities
+            the grid cannot see (null-space noise) goes, the rest is kept as FLIP keeps it.
+            XPIC(1) is PIC; each order past 1 costs one more grid-particle-grid pass."""
 import logging
 import time
 
@@ -33,7 +40,7 @@ from ..kernels import transfer as kt
 _log = logging.getLogger("fenicsmpm")
 
 SCHEMES = ("USF", "USL", "MUSL", "AVG")
-TRANSFERS = ("aflip", "apic", "flip")
+TRANSFERS = ("aflip", "apic", "flip", "xpic")
 STARTS = ("euler", "leapfrog")
 AFFINE = ("aflip", "apic")      # the transfers that carry the affine matrix apic_C
 PLASTIC_FLIP = 0.99     # the default FLIP fraction when a material flows plastically
@@ -70,9 +77,10 @@ class Explicit:
     supports_prescribed_motion = True
 
     def __init__(self, scheme="MUSL", flip=None, transfer=None, displacement=None,
-                 start="euler"):
+                 start="euler", xpic_order=2):
         """scheme: one of SCHEMES; transfer: one of TRANSFERS (default "flip"; module
-        docstring); flip: the FLIP fraction of transfer="flip" or "aflip" (default None:
+        docstring); xpic_order: m of transfer="xpic" (an int >= 1; 1 is PIC);
+        flip: the FLIP fraction of transfer="flip" or "aflip" (default None:
         `default_flip` of the scene's materials,
         1 for elastic scenes, PLASTIC_FLIP = 0.99 where a material flows plastically).
 
@@ -104,15 +112,21 @@ class Explicit:
             transfer = "flip"
         if transfer not in TRANSFERS:
             raise ValueError(f"Explicit: 'transfer' must be one of {TRANSFERS}, got {transfer!r}")
-        if flip is not None and transfer == "apic":
+        if flip is not None and transfer in ("apic", "xpic"):
             raise ValueError(f"Explicit: 'flip' applies to transfer='flip' or 'aflip', got "
                              f"transfer={transfer!r} and flip={flip!r}")
-        self._flip_auto = flip is None and transfer != "apic"
+        if isinstance(xpic_order, bool) or not isinstance(xpic_order, (int, np.integer)) \
+                or xpic_order < 1:
+            raise ValueError(f"Explicit: 'xpic_order' must be an int >= 1, got {xpic_order!r}")
+        self.xpic_order = int(xpic_order)
+        self._flip_auto = flip is None and transfer not in ("apic", "xpic")
         flip = 1.0 if flip is None else flip
         if isinstance(flip, bool) or not (isinstance(flip, (int, float, np.floating))
                                           and 0.0 <= flip <= 1.0):
             raise ValueError(f"Explicit: 'flip' must be in [0, 1], got {flip!r}")
         self.scheme, self.flip, self.transfer = scheme, float(flip), transfer
+        if transfer == "xpic":
+            self.flip = 0.0          # the particle velocity is S (...) (module docstring)
 
     def setup(self, sim):
         if self._flip_auto:
@@ -166,6 +180,26 @@ class Explicit:
         mv = np.zeros((g.n_nodes, g.gdim))
         kt.p2g_affine(g.D, sim.nodes, sim.N, p.mass, p.v, p.apic_C, p.x, g.node_x, m, mv)
         return m, mv
+
+    def _xpic_change(self, sim, vL, inv_m):
+        """v^L - v* of XPIC(m) (module docstring): sum_{k=1}^{m} (-1)^(k+1) C(m, k) Q^(k-1) v^L
+        subtracted from v^L, each Q = S+ S one interpolation to the particles and one
+        mass-weighted P2G (summed over ranks). 0 for m = 1 (PIC)."""
+        from math import comb
+        g, p, m = sim.grid, sim.particles, self.xpic_order
+        change = vL.copy()
+        term = vL
+        q = np.zeros((len(p), g.gdim))
+        for k in range(1, m + 1):
+            change -= (-1) ** (k + 1) * comb(m, k) * term
+            if k < m:                                   # term = Q term
+                q[:] = 0.0
+                kt.flip_blend(g.D, sim.nodes, sim.N, term, term, 0.0, q)
+                term = np.zeros_like(vL)
+                kt.p2g_weighted(g.D, sim.nodes, sim.N, p.mass, q, term)
+                g.accumulate(term)
+                term *= inv_m[:, None]
+        return change
 
     def _kick(self, sim, dt):
         """The time step of this step's velocity update: dt / 2 on a run's first step with
@@ -244,6 +278,9 @@ class Explicit:
         remap = self.scheme in ("MUSL", "AVG")     # the updated velocities mapped back
         mv2 = None
         aflip = self.flip if self.transfer == "aflip" else 0.0
+        v_to_p = v1                                  # the velocity the particles interpolate
+        if self.transfer == "xpic":
+            v_to_p = v1 - self._xpic_change(sim, mv * inv_m[:, None], inv_m) * free
         if affine and remap:                         # G2P and that P2G in one particle pass
             mv2 = np.zeros_like(mv)
             kt.g2p_affine_momentum(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v0,
@@ -253,10 +290,10 @@ class Explicit:
                           aflip, p.x, p.v, p.u, p.apic_C)
         elif remap:
             mv2 = np.zeros_like(mv)
-            kt.g2p_momentum(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v,
+            kt.g2p_momentum(grid.D, sim.nodes, sim.N, dt * v1, v0, v_to_p, self.flip, p.x, p.v,
                             p.u, p.mass, mv2)
         else:
-            kt.g2p(grid.D, sim.nodes, sim.N, dt * v1, v0, v1, self.flip, p.x, p.v, p.u)
+            kt.g2p(grid.D, sim.nodes, sim.N, dt * v1, v0, v_to_p, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
