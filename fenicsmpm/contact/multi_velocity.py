@@ -179,7 +179,8 @@ LATERAL = 1.5           # gap check: particles within LATERAL half-sizes of a no
 NORMALS = ("average", "max-gradient")
 INTERFACES = ("auto", "node", "paired", "coverage")
 BOX_TOL = 1e-6          # interface "auto": a rigid body's domains fill its bounding box to this
-ALIGNED = 0.95          # an axis within 18 deg of the normal (interfaces "paired", "coverage")
+ALIGNED = 0.95          # an axis within 18 deg of the normal (interface "coverage")
+PAIR_ALIGNED = 0.85     # interface "paired": within 32 deg (ExplicitContact._pairs)
 
 
 def set_body(particles, body_id, region=None):
@@ -1048,7 +1049,8 @@ class ExplicitContact:
             return self._ones
         nbr, _, vol = self._lattice(grid)
         cover = np.ones((n, nb))
-        along = np.abs(self._ref_n) < ALIGNED        # axes along R's surface at each node
+        aligned = PAIR_ALIGNED if self._uses("paired", grid) else ALIGNED
+        along = np.abs(self._ref_n) < aligned        # axes along R's surface at each node
         for b in bodies:
             rho = self._m_b[:, b] / vol
             full = rho.copy()
@@ -1078,7 +1080,7 @@ class ExplicitContact:
         idx = np.arange(len(present))
         cand = ((n_def == 1) & (n_rig == 1) & np.isfinite(self._lo_b[idx, body_r])
                 & np.isfinite(self._hi_b[idx, body_a])
-                & (np.abs(self._ref_n).max(axis=1) >= ALIGNED))
+                & (np.abs(self._ref_n).max(axis=1) >= PAIR_ALIGNED))
         masked = present.copy()
         masked[idx[cand], body_r[cand]] = False
         nbr, spacing, _ = self._lattice(grid)
