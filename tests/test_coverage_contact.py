@@ -1,7 +1,7 @@
 """fm.ExplicitContact(interface="coverage"): the node-wise projection against a rigid body,
 each node's correction scaled by the body's coverage of the node (contact.multi_velocity,
-module docstring "Coverage interface"; the default interface="auto" takes the paired interface
-with this coverage against rigid bodies that are axis-aligned boxes), serially and on 2 ranks.
+module docstring "Coverage interface"), the default interface="auto"'s choice against rigid
+bodies that are axis-aligned boxes, serially and on 2 ranks.
 
 - The coverage of Prandtl's footing (problems.footing.strip_footing, B/2 = 0.5 m, h = 0.25 m:
   its edge on a grid line) after one step: 0.5 at the edge node (the footing covers half of
@@ -117,8 +117,8 @@ def wedge(h=0.1, interface=None, c=comm, theta=30.0, push=0.2):
 
 
 def test_auto_takes_boxes_on_cells_of_any_aspect_ratio():
-    """interface="auto" scales the corrections against a rigid box (its pairs) by its coverage
-    also on cells of unequal spacings (0.1 x 0.05 m: the particle domains are boxes of the cell's
+    """interface="auto" scales the corrections against a rigid box by its coverage also on
+    cells of unequal spacings (0.1 x 0.05 m: the particle domains are boxes of the cell's
     aspect ratio, as Particles.fill makes them), not against a rigid wedge there."""
     from dolfinx import mesh
     import fenicsmpm as fm

@@ -98,12 +98,9 @@ again `body_contact_force`, and `penalty_stats` holds the step's number of pairs
 pairs and largest penetration.
 
 Paired interface (interface="paired", multi-velocity with a rigid body and the gap check, on
-axis-aligned lattices; the default interface="auto" takes it against every rigid body whose
-particle domains fill an axis-aligned box, since 2026-12-07 (evening); measured in
-docs/guide/contact.md): at the nodes a deformable body A shares with a rigid body R whose
-normal lies within 32 degrees of a grid axis (PAIR_ALIGNED; 18 degrees before 2026-12-07,
-evening, when the two nodes of a footing's edge column left the pairs as their normal turned
-and the pressure dropped by 7-10 % at 5 cells under B/2), the node below R's surface along that axis and its neighbour above it carry the
+axis-aligned lattices; an option, measured in docs/guide/contact.md): at the nodes a
+deformable body A shares with a rigid body R whose normal lies within 18 degrees of a grid
+axis, the node below R's surface along that axis and its neighbour above it carry the
 surface velocity v_s = xi v_above + (1 - xi) v_below (xi: the surface's height over the lower
 node in spacings), and one constraint per pair holds (v_s^A - v_s^R) . n to the allowed
 approach, split between the two nodes with the least change of kinetic energy
@@ -114,10 +111,11 @@ Since 2026-12-07 each pair's impulse and friction are scaled by R's coverage of 
 R-side node where R is an axis-aligned box (the coverage interface below; nodes without a
 pair get the node-wise projection scaled the same way), so R no longer acts half a cell
 wider when its edge lies on a grid line: Prandtl's footing (bench bearing-capacity's
-_row(h, ...), the default) reads 1.1331 / 1.0457 / 0.9971 (2 + pi) c_u at 2 / 5 / 10 cells
-under B/2 with its edge on a grid line (coverage: 1.3416 / 1.0120 / 1.0265) and 0.9805 /
-1.0101 / 0.9953 at 2.5 / 5.5 / 10.5 cells with its edge at a cell centre (coverage 1.1105 /
-1.0599 / 1.0321).
+_row(h, ..., interface="paired")) reads 1.133 / 0.9775 / 0.9826 (2 + pi) c_u at 2 / 5 / 10
+cells under B/2 with its edge on a grid line (coverage: 1.3416 / 1.0120 / 1.0265) and
+0.957 / 0.9964 / 1.0014 at 2.5 / 5.5 / 10.5 cells with its edge at a cell centre (paired
+without the coverage 0.964 / 1.008 / 1.004; coverage 1.1105 / 1.0599 / 1.0321), the
+plateau's 0.1 s windows within 0.021 / 0.020 at 10 / 10.5 cells (coverage 0.10 / 0.077).
 Rollers out of the normals (every multi-velocity interface but an explicit "node"): a
 Dirichlet-fixed velocity component (a roller: a symmetry plane, the axis of an axisymmetric
 grid) is taken out of the mass gradients before the normals are formed, so the contact acts
@@ -131,8 +129,8 @@ half=False)); the hammered pile of demos/pile_driving.py, whose axis nodes are r
 penetrates 0.662 m in its first blow at h = 0.15 m with the diagonal normal and 0.624 m
 without it (0.627 / 0.400 m against 0.391 / 0.082 m in the two blows of --quick).
 
-Coverage interface (interface="coverage"; the default interface="auto" took it against
-box-shaped rigid bodies earlier on 2026-12-07, and takes "node" against the other rigid bodies;
+Coverage interface (interface="coverage"; the default interface="auto" takes it against every
+rigid body whose particle domains fill an axis-aligned box, and "node" against the others;
 multi-velocity with the gap check on axis-aligned lattices; measured in
 docs/guide/contact.md): the node-wise projection against a rigid body R, each correction of
 node i (normal and friction) scaled by R's coverage of the node,
@@ -145,8 +143,7 @@ covers. By the partition of unity, sum_i alpha_i V_i along a row of nodes is abo
 extent along its surface, so the constrained band of A is as wide as R instead of half a cell
 wider: a jacked pile's resistance converges in h, and Prandtl's footing, half model or whole,
 comes within 3 % at 10 cells under B/2 (docs/guide/contact.md). The neighbours "along R's
-surface" are, where the node's normal lies within 18 degrees of a grid axis (a face; 32
-degrees, PAIR_ALIGNED, where the coverage scales the paired interface's pairs), those
+surface" are, where the node's normal lies within 18 degrees of a grid axis (a face), those
 along the other axes, and elsewhere (a corner: the pile's tip edge) all lattice neighbours.
 On an inclined face a node's neighbour inside R makes alpha_i about 1/2, and at a sharp tip
 the half-held nodes let A in (a rigid 30 degree V wedge pushed 0.2 m into a block at h = 0.05
@@ -725,9 +722,9 @@ class ExplicitContact:
     or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
-    interface: "auto" (default: "paired" against every rigid body whose particle domains
+    interface: "auto" (default: "coverage" against every rigid body whose particle domains
     fill an axis-aligned box, a footing, pile or wall, on an axis-aligned lattice, and "node"
-    elsewhere, with the rollers taken out of the normals; module docstring "Paired
+    elsewhere, with the rollers taken out of the normals; module docstring "Coverage
     interface"), "node" (against a rigid body every shared node is projected alone, the
     normals as the mass gradients make them), "paired" (one constraint per pair of nodes
     across a rigid body's surface on axis-aligned lattices, scaled by the coverage against
@@ -978,20 +975,20 @@ class ExplicitContact:
 
     def _uses(self, interface, grid):
         """Whether `interface` ("paired", "coverage") can act: it is the chosen one ("auto"
-        chooses "paired", against box-shaped bodies: _pairs), there is a rigid body, the gap check is on and the grid is an
+        chooses "coverage"), there is a rigid body, the gap check is on and the grid is an
         axis-aligned lattice (else the node-wise projection everywhere)."""
-        chosen = "paired" if self.interface == "auto" else self.interface
+        chosen = "coverage" if self.interface == "auto" else self.interface
         return (chosen == interface and bool(self.rigid) and self.gap is not None
                 and self.algorithm == "multi-velocity" and grid.structured)
 
     def _covered(self, sim):
         """The rigid bodies whose corrections are scaled by their coverage (_coverage): all of
-        them with interface="coverage", with "auto" and "paired" those whose particle domains fill an
+        them with interface="coverage", with "auto" those whose particle domains fill an
         axis-aligned box (the domains, boxes of the cell's aspect ratio and the particle's
         volume as shapes.gimp.initial_half_widths makes them, summed equal their bounding
         box to BOX_TOL; on axisymmetric grids in the meridian plane; decided at the first
-        step, collective): the pairs' impulses are scaled by the coverage of their R-side node;
-        none where the interface does not act (_uses)."""
+        step, collective); with "paired" those boxes too (the pairs' impulses scaled by the
+        coverage of their R-side node); none where the interface does not act (_uses)."""
         if not (self._uses("coverage", sim.grid) or self._uses("paired", sim.grid)):
             return ()
         if self.interface == "coverage":
@@ -1067,8 +1064,7 @@ class ExplicitContact:
         return cover
 
     def _pairs(self, sim):
-        """interface="paired" (paired_rigid_contact; "auto": against the box-shaped rigid bodies
-        of _covered only, the others node-wise): the nodes it handles, with the presence
+        """interface="paired" (paired_rigid_contact): the nodes it handles, with the presence
         mask the node-wise projection then sees (their rigid body removed), each node's
         deformable and rigid body, the lattice neighbours and spacing; None where it does not
         apply (interface="node", no rigid body, the gap check off, or a grid that is not an
@@ -1082,9 +1078,7 @@ class ExplicitContact:
         body_a = np.argmax(present & ~rig, axis=1).astype(np.int32)
         body_r = np.argmax(present & rig, axis=1).astype(np.int32)
         idx = np.arange(len(present))
-        boxed = np.zeros(self.nb, dtype=bool)
-        boxed[list(self._covered(sim) if self.interface == "auto" else self.rigid)] = True
-        cand = ((n_def == 1) & (n_rig == 1) & boxed[body_r] & np.isfinite(self._lo_b[idx, body_r])
+        cand = ((n_def == 1) & (n_rig == 1) & np.isfinite(self._lo_b[idx, body_r])
                 & np.isfinite(self._hi_b[idx, body_a])
                 & (np.abs(self._ref_n).max(axis=1) >= PAIR_ALIGNED))
         masked = present.copy()
