@@ -99,8 +99,10 @@ pairs and largest penetration.
 
 Paired interface (interface="paired", multi-velocity with a rigid body and the gap check, on
 axis-aligned lattices; an option, measured in docs/guide/contact.md): at the nodes a
-deformable body A shares with a rigid body R whose normal lies within 18 degrees of a grid
-axis, the node below R's surface along that axis and its neighbour above it carry the
+deformable body A shares with a rigid body R whose normal lies within 32 degrees of a grid
+axis (PAIR_ALIGNED; 18 degrees before 2026-12-07, evening, when the two nodes of a footing's
+edge column left the pairs as their normal turned and the pressure dropped by 7-10 % at 5
+cells under B/2), the node below R's surface along that axis and its neighbour above it carry the
 surface velocity v_s = xi v_above + (1 - xi) v_below (xi: the surface's height over the lower
 node in spacings), and one constraint per pair holds (v_s^A - v_s^R) . n to the allowed
 approach, split between the two nodes with the least change of kinetic energy
@@ -111,11 +113,11 @@ Since 2026-12-07 each pair's impulse and friction are scaled by R's coverage of 
 R-side node where R is an axis-aligned box (the coverage interface below; nodes without a
 pair get the node-wise projection scaled the same way), so R no longer acts half a cell
 wider when its edge lies on a grid line: Prandtl's footing (bench bearing-capacity's
-_row(h, ..., interface="paired")) reads 1.133 / 0.9775 / 0.9826 (2 + pi) c_u at 2 / 5 / 10
+_row(h, ..., interface="paired")) reads 1.1331 / 1.0457 / 0.9971 (2 + pi) c_u at 2 / 5 / 10
 cells under B/2 with its edge on a grid line (coverage: 1.3416 / 1.0120 / 1.0265) and
-0.957 / 0.9964 / 1.0014 at 2.5 / 5.5 / 10.5 cells with its edge at a cell centre (paired
-without the coverage 0.964 / 1.008 / 1.004; coverage 1.1105 / 1.0599 / 1.0321), the
-plateau's 0.1 s windows within 0.021 / 0.020 at 10 / 10.5 cells (coverage 0.10 / 0.077).
+0.9805 / 1.0101 / 0.9953 at 2.5 / 5.5 / 10.5 cells with its edge at a cell centre
+(coverage 1.1105 / 1.0599 / 1.0321). Not the default: the jacked pile's resistance is 12 %
+apart between its two finest cells with it (coverage 0.6 %; docs/guide/contact.md).
 Rollers out of the normals (every multi-velocity interface but an explicit "node"): a
 Dirichlet-fixed velocity component (a roller: a symmetry plane, the axis of an axisymmetric
 grid) is taken out of the mass gradients before the normals are formed, so the contact acts
