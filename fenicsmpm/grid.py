@@ -162,9 +162,9 @@ class Grid:
     def _global_lattice(self):
         """The structured lattice's global lower corner and spacing (`origin_global`,
         `spacing_global`: the minima over ranks), its global upper corner (`upper_global`, the
-        maximum of the ranks' largest node coordinates) and the global index of this rank's first box
-        (`first`), for locate: with its own corner and spacing each rank computed its own
-        (x - origin) / spacing, and a point on a grid line between two ranks could fall in the
+        maximum of the ranks' largest node coordinates) and the global index of this rank's
+        first box (`first`), for locate: with its own corner and spacing each rank computed its
+        own (x - origin) / spacing, and a point on a grid line between two ranks could fall in the
         ghost box on both (penalty polylines along a rank boundary were then located by
         neither, and the contact lost). Collective."""
         s = self._structured

@@ -8,8 +8,9 @@ ch. 4) with multi-velocity frictional contact (mu = 0.2), axisymmetric.
   0.082 m since the rollers of the axis are taken out of the contact normals, 2026-12-07;
   0.627 / 0.400 m before, 0.90 / 0.53 m before dt="auto" followed the state; quick mode
   uses the gap check, gap = 0, since the plain detection locks a pile half a cell wide), and
-  the soil resists (peak vertical contact force > 10 kN; measured 201.9 and 127.9 kN). The penetration is NOT converged in h (demo docstring), so it is not compared
-  with the seed's ~0.11 m a blow;
+  the soil resists (peak vertical contact force > 10 kN; measured 201.9 and 127.9 kN). The
+  penetration is NOT converged in h (demo docstring), so it is not compared with the seed's
+  ~0.11 m a blow;
 - no void ratio below e_d(p) (eq 3.15) and at most 1 % of the soil particles above e_i(p)
   (surface particles pulled apart next to the pile: e grows with tr D whatever the stress;
   measured 8 of 2.2k); the smallest void ratio stays above 0.4 (e_d at 10 MPa is 0.42) and

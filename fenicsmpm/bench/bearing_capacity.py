@@ -24,8 +24,9 @@ curve per row).
 
 Rows h<h_i>-centred, h<h_i>-rough-centred, h<h_i>-mc20-centred and h<h_i>-mc30-centred
 (quick: only the rough one; h<h_i>-rough-centred-node the rough one with interface="node"):
-the default, rough, mc20 and mc30 rows with the footing's edge at a cell centre, h_i = implicit_cell_size(h) below (2.5 / 5.5 / 10.5 cells under B/2), where
-the footing is exactly B/2 wide (with its edge on a grid line, the rigid footing's contact
+the default, rough, mc20 and mc30 rows with the footing's edge at a cell centre, h_i =
+implicit_cell_size(h) below (2.5 / 5.5 / 10.5 cells under B/2), where the footing is
+exactly B/2 wide (with its edge on a grid line, the rigid footing's contact
 reaches the nodes of that line, half a cell beyond B/2: contact.multi_velocity's gap check).
 Rows h<h_i>-paired-centred and h<h_i>-mc20-paired-centred (full run only): the centred and
 mc20-centred rows with fm.ExplicitContact(interface="paired") (one constraint per node pair
@@ -37,8 +38,9 @@ axis-aligned box of particles) the node-wise projection scaled by the footing's 
 each node (contact.multi_velocity's "Coverage interface"; since 2026-12-07). Rows h<h>-node,
 h<h>-mpm-fbar-on-node, h<h>-nu0.3-node, h<h>-rough-node and h<h>-mc20-node (the last in the full
 run only): the default, mpm-fbar-on, nu0.3, rough and mc20 rows with interface="node" (every
-node projected alone, the default before: the footing acts up to half a cell wider, and the node on the symmetry line is held only in part, so the half model
-reads less than the whole footing, problems.footing.strip_footing(half=False)).
+node projected alone, the default before: the footing acts up to half a cell wider, and the
+node on the symmetry line is held only in part, so the half model reads less than the whole
+footing, problems.footing.strip_footing(half=False)).
 
 Rows h<h_i>-implicit, -implicit-nu0.3, -implicit-rough: the same Tresca soil (nu = 0.49, 0.3;
 rough: the footing row held sideways as well) under the implicit particle footing

@@ -43,6 +43,7 @@ SCHEMES = ("USF", "USL", "MUSL", "AVG")
 TRANSFERS = ("aflip", "apic", "flip", "xpic")
 STARTS = ("euler", "leapfrog")
 AFFINE = ("aflip", "apic")      # the transfers that carry the affine matrix apic_C
+NO_FLIP = ("apic", "xpic")      # the transfers without a FLIP fraction
 PLASTIC_FLIP = 0.99     # the default FLIP fraction when a material flows plastically
 
 
@@ -112,14 +113,14 @@ class Explicit:
             transfer = "flip"
         if transfer not in TRANSFERS:
             raise ValueError(f"Explicit: 'transfer' must be one of {TRANSFERS}, got {transfer!r}")
-        if flip is not None and transfer in ("apic", "xpic"):
+        if flip is not None and transfer in NO_FLIP:
             raise ValueError(f"Explicit: 'flip' applies to transfer='flip' or 'aflip', got "
                              f"transfer={transfer!r} and flip={flip!r}")
         if isinstance(xpic_order, bool) or not isinstance(xpic_order, (int, np.integer)) \
                 or xpic_order < 1:
             raise ValueError(f"Explicit: 'xpic_order' must be an int >= 1, got {xpic_order!r}")
         self.xpic_order = int(xpic_order)
-        self._flip_auto = flip is None and transfer not in ("apic", "xpic")
+        self._flip_auto = flip is None and transfer not in NO_FLIP
         flip = 1.0 if flip is None else flip
         if isinstance(flip, bool) or not (isinstance(flip, (int, float, np.floating))
                                           and 0.0 <= flip <= 1.0):
