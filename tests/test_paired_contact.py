@@ -1,5 +1,6 @@
-"""fm.ExplicitContact(interface="paired") (contact.multi_velocity.paired_rigid_contact): one
-contact constraint per pair of nodes across a rigid body's surface, serially and on 2 ranks.
+"""fm.ExplicitContact(interface="paired") (contact.multi_velocity.paired_rigid_contact; the
+default interface="auto" takes it against box-shaped rigid bodies): one contact constraint
+per pair of nodes across a rigid body's surface, serially and on 2 ranks.
 
 - Bad input: an unknown interface name is a ValueError naming the parameter.
 - The lattice neighbours (lattice_neighbours) lie one spacing away along their axis, and on
@@ -7,9 +8,10 @@ contact constraint per pair of nodes across a rigid body's surface, serially and
 - Grid.update_ghosts copies owned values to the ghost copies.
 - Prandtl's smooth footing (problems.footing.strip_footing, von Mises soil, the defaults) with
   its edge at a cell centre, 2.5 cells under B/2 (h = 0.2 m), pushed to 0.8 s: the pressure
-  over the last 0.3 s within 6 % of (2 + pi) c_u (measured 0.9805 with pairs within 32
-  degrees of an axis, 2026-12-07 evening; 0.9569 with 18 degrees and the footing's coverage,
-  0.964 without the coverage; the bench row paired-centred at 2.5 cells; the node-wise
+  over the last 0.3 s within 6 % of (2 + pi) c_u (measured 0.9569 with pairs within 32
+  degrees of an axis and the coverage telling faces from corners at 18 degrees, the
+  default since 2026-12-07, late, as with 18 degrees for both; 0.9805 with 32 degrees for
+  both, 0.964 without the coverage; the bench row centred at 2.5 cells; the node-wise
   projection 1.054 there, docs/guide/contact.md), and the same history on 2 ranks as
   serially (to 1e-6).
 - With its edge on a grid line (h = 0.25 m, 2 cells under B/2) the pairs are scaled by the

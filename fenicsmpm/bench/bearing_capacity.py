@@ -28,14 +28,16 @@ the default, rough, mc20 and mc30 rows with the footing's edge at a cell centre,
 implicit_cell_size(h) below (2.5 / 5.5 / 10.5 cells under B/2), where the footing is
 exactly B/2 wide (with its edge on a grid line, the rigid footing's contact
 reaches the nodes of that line, half a cell beyond B/2: contact.multi_velocity's gap check).
-Rows h<h_i>-paired-centred and h<h_i>-mc20-paired-centred (full run only): the centred and
-mc20-centred rows with fm.ExplicitContact(interface="paired") (one constraint per node pair
-across the footing's base, scaled by the footing's coverage, contact.multi_velocity's "Paired
-interface"); h<h>-paired (full run only): the default row with it (the edge on a grid line).
+Rows h<h_i>-coverage-centred and h<h_i>-mc20-coverage-centred (full run only): the centred
+and mc20-centred rows with fm.ExplicitContact(interface="coverage") (the node-wise projection
+scaled by the footing's coverage of each node, contact.multi_velocity's "Coverage
+interface", the default on 2026-12-07 until late that day); h<h>-coverage (full run only):
+the default row with it (the edge on a grid line).
 
 The explicit rows take fm.ExplicitContact's default interface="auto": against the footing (an
-axis-aligned box of particles) the node-wise projection scaled by the footing's coverage of
-each node (contact.multi_velocity's "Coverage interface"; since 2026-12-07). Rows h<h>-node,
+axis-aligned box of particles) one constraint per pair of nodes across its surface, scaled by
+its coverage of the pair's node inside it (contact.multi_velocity's "Paired interface"; since
+2026-12-07, late). Rows h<h>-node,
 h<h>-mpm-fbar-on-node, h<h>-nu0.3-node, h<h>-rough-node and h<h>-mc20-node (the last in the full
 run only): the default, mpm-fbar-on, nu0.3, rough and mc20 rows with interface="node" (every
 node projected alone, the default before: the footing acts up to half a cell wider, and the
@@ -101,18 +103,18 @@ ROWS = (("default", "auto", "auto", {}, PUSH),
         ("rough-node", "auto", "auto", dict(mu=10.0, interface="node"), PUSH),
         ("mc20-node", "auto", "auto", dict(soil=_mohr_coulomb(20.0), room=1.0,
                                            interface="node"), MC_PUSH),
-        ("paired", "auto", "auto", dict(interface="paired"), PUSH))
+        ("coverage", "auto", "auto", dict(interface="coverage"), PUSH))
 COARSE_ONLY = ("mpm-fbar-off", "mc30-mpm")     # rows run at h >= 0.1 only
-FULL_ONLY = ("mc20-node", "paired")     # not in the quick run
+FULL_ONLY = ("mc20-node", "coverage")     # not in the quick run
 # the defaults with the footing's edge at a cell centre (implicit_cell_size: B/2 exactly);
 # name, strip_footing options, in the quick run too, (t_end, plateau from)
 CENTRED_ROWS = (("centred", {}, False, PUSH), ("rough-centred", dict(mu=10.0), True, PUSH),
                 ("rough-centred-node", dict(mu=10.0, interface="node"), True, PUSH),
                 ("mc20-centred", dict(soil=_mohr_coulomb(20.0), room=1.0), False, MC_PUSH),
                 ("mc30-centred", dict(soil=_mohr_coulomb(30.0), room=1.0), False, MC_PUSH),
-                ("paired-centred", dict(interface="paired"), False, PUSH),
-                ("mc20-paired-centred", dict(soil=_mohr_coulomb(20.0), room=1.0,
-                                             interface="paired"), False, MC_PUSH))
+                ("coverage-centred", dict(interface="coverage"), False, PUSH),
+                ("mc20-coverage-centred", dict(soil=_mohr_coulomb(20.0), room=1.0,
+                                               interface="coverage"), False, MC_PUSH))
 
 
 def _row(h, name, shape, use_fbar, comm, push=PUSH, **scene):

@@ -98,7 +98,9 @@ again `body_contact_force`, and `penalty_stats` holds the step's number of pairs
 pairs and largest penetration.
 
 Paired interface (interface="paired", multi-velocity with a rigid body and the gap check, on
-axis-aligned lattices; an option, measured in docs/guide/contact.md): at the nodes a
+axis-aligned lattices; the default interface="auto" takes it against every rigid body whose
+particle domains fill an axis-aligned box, since 2026-12-07, late; measured in
+docs/guide/contact.md): at the nodes a
 deformable body A shares with a rigid body R whose normal lies within 32 degrees of a grid
 axis (PAIR_ALIGNED; 18 degrees before 2026-12-07, evening, when the two nodes of a footing's
 edge column left the pairs as their normal turned and the pressure dropped by 7-10 % at 5
@@ -113,11 +115,12 @@ Since 2026-12-07 each pair's impulse and friction are scaled by R's coverage of 
 R-side node where R is an axis-aligned box (the coverage interface below; nodes without a
 pair get the node-wise projection scaled the same way), so R no longer acts half a cell
 wider when its edge lies on a grid line: Prandtl's footing (bench bearing-capacity's
-_row(h, ..., interface="paired")) reads 1.1331 / 1.0457 / 0.9971 (2 + pi) c_u at 2 / 5 / 10
-cells under B/2 with its edge on a grid line (coverage: 1.3416 / 1.0120 / 1.0265) and
-0.9805 / 1.0101 / 0.9953 at 2.5 / 5.5 / 10.5 cells with its edge at a cell centre
-(coverage 1.1105 / 1.0599 / 1.0321). Not the default: the jacked pile's resistance is 12 %
-apart between its two finest cells with it (coverage 0.6 %; docs/guide/contact.md).
+_row(h, ...), the default) reads 1.0441 / 0.9989 (2 + pi) c_u at 5 / 10 cells under B/2
+with its edge on a grid line (coverage: 1.0120 / 1.0265) and 0.9569 / 1.0070 / 0.9962 at
+2.5 / 5.5 / 10.5 cells with its edge at a cell centre (coverage 1.1105 / 1.0599 / 1.0321).
+The coverage tells faces from corners at 18 degrees (ALIGNED) whatever the pairs' angle:
+with 32 degrees there too, the jacked pile's tip corner nodes counted as a face's and its
+resistance was 12 % apart between its two finest cells (4 % with 18 degrees there).
 Rollers out of the normals (every multi-velocity interface but an explicit "node"): a
 Dirichlet-fixed velocity component (a roller: a symmetry plane, the axis of an axisymmetric
 grid) is taken out of the mass gradients before the normals are formed, so the contact acts
@@ -131,8 +134,8 @@ half=False)); the hammered pile of demos/pile_driving.py, whose axis nodes are r
 penetrates 0.662 m in its first blow at h = 0.15 m with the diagonal normal and 0.624 m
 without it (0.627 / 0.400 m against 0.391 / 0.082 m in the two blows of --quick).
 
-Coverage interface (interface="coverage"; the default interface="auto" takes it against every
-rigid body whose particle domains fill an axis-aligned box, and "node" against the others;
+Coverage interface (interface="coverage"; the default interface="auto" took it against
+box-shaped rigid bodies until 2026-12-07, late, and takes "node" against the other bodies;
 multi-velocity with the gap check on axis-aligned lattices; measured in
 docs/guide/contact.md): the node-wise projection against a rigid body R, each correction of
 node i (normal and friction) scaled by R's coverage of the node,
@@ -181,7 +184,7 @@ LATERAL = 1.5           # gap check: particles within LATERAL half-sizes of a no
 NORMALS = ("average", "max-gradient")
 INTERFACES = ("auto", "node", "paired", "coverage")
 BOX_TOL = 1e-6          # interface "auto": a rigid body's domains fill its bounding box to this
-ALIGNED = 0.95          # an axis within 18 deg of the normal (interface "coverage")
+ALIGNED = 0.95          # a face: an axis within 18 deg of the normal (the coverage, _coverage)
 PAIR_ALIGNED = 0.85     # interface "paired": within 32 deg (ExplicitContact._pairs)
 
 
@@ -724,9 +727,9 @@ class ExplicitContact:
     or {body_id: fm.RigidLoad(force, gravity)} for a force-driven rigid body.
     normal: "max-gradient", "average" or {body: outward normal}; gap: the gap-check tolerance
     in cell sizes, or None for none (module docstring).
-    interface: "auto" (default: "coverage" against every rigid body whose particle domains
+    interface: "auto" (default: "paired" against every rigid body whose particle domains
     fill an axis-aligned box, a footing, pile or wall, on an axis-aligned lattice, and "node"
-    elsewhere, with the rollers taken out of the normals; module docstring "Coverage
+    elsewhere, with the rollers taken out of the normals; module docstring "Paired
     interface"), "node" (against a rigid body every shared node is projected alone, the
     normals as the mass gradients make them), "paired" (one constraint per pair of nodes
     across a rigid body's surface on axis-aligned lattices, scaled by the coverage against
@@ -977,9 +980,10 @@ class ExplicitContact:
 
     def _uses(self, interface, grid):
         """Whether `interface` ("paired", "coverage") can act: it is the chosen one ("auto"
-        chooses "coverage"), there is a rigid body, the gap check is on and the grid is an
-        axis-aligned lattice (else the node-wise projection everywhere)."""
-        chosen = "coverage" if self.interface == "auto" else self.interface
+        chooses "paired", against box-shaped bodies only: _pairs), there is a rigid body, the
+        gap check is on and the grid is an axis-aligned lattice (else the node-wise
+        projection everywhere)."""
+        chosen = "paired" if self.interface == "auto" else self.interface
         return (chosen == interface and bool(self.rigid) and self.gap is not None
                 and self.algorithm == "multi-velocity" and grid.structured)
 
@@ -1051,8 +1055,7 @@ class ExplicitContact:
             return self._ones
         nbr, _, vol = self._lattice(grid)
         cover = np.ones((n, nb))
-        aligned = PAIR_ALIGNED if self._uses("paired", grid) else ALIGNED
-        along = np.abs(self._ref_n) < aligned        # axes along R's surface at each node
+        along = np.abs(self._ref_n) < ALIGNED        # axes along R's surface at each node
         for b in bodies:
             rho = self._m_b[:, b] / vol
             full = rho.copy()
@@ -1066,7 +1069,8 @@ class ExplicitContact:
         return cover
 
     def _pairs(self, sim):
-        """interface="paired" (paired_rigid_contact): the nodes it handles, with the presence
+        """interface="paired" (paired_rigid_contact; "auto": against the box-shaped rigid bodies
+        of _covered only, the others node-wise): the nodes it handles, with the presence
         mask the node-wise projection then sees (their rigid body removed), each node's
         deformable and rigid body, the lattice neighbours and spacing; None where it does not
         apply (interface="node", no rigid body, the gap check off, or a grid that is not an
@@ -1080,7 +1084,10 @@ class ExplicitContact:
         body_a = np.argmax(present & ~rig, axis=1).astype(np.int32)
         body_r = np.argmax(present & rig, axis=1).astype(np.int32)
         idx = np.arange(len(present))
-        cand = ((n_def == 1) & (n_rig == 1) & np.isfinite(self._lo_b[idx, body_r])
+        boxed = np.zeros(self.nb, dtype=bool)
+        boxed[list(self._covered(sim) if self.interface == "auto" else self.rigid)] = True
+        cand = ((n_def == 1) & (n_rig == 1) & boxed[body_r]
+                & np.isfinite(self._lo_b[idx, body_r])
                 & np.isfinite(self._hi_b[idx, body_a])
                 & (np.abs(self._ref_n).max(axis=1) >= PAIR_ALIGNED))
         masked = present.copy()
