@@ -16,6 +16,8 @@ per pair of nodes across a rigid body's surface, serially and on 2 ranks.
   serially (to 1e-6).
 - With its edge on a grid line (h = 0.25 m, 2 cells under B/2) the pairs are scaled by the
   footing's coverage: 1/2 at the edge node, 1 at the node on the symmetry line, after one step.
+- The library's defaults (interface="auto") at 5.5 cells under B/2, the edge at a cell centre:
+  within 3 % of (2 + pi) c_u (heavy: the 2-rank pass of `make test`).
 """
 import numpy as np
 import pytest
@@ -88,3 +90,20 @@ def test_paired_footing_reaches_prandtl_and_matches_serial():
         ts, qs = _footing_history(MPI.COMM_SELF)
         assert len(ts) == len(t)
         assert np.allclose(q, qs, rtol=1e-6, atol=1e-9), np.abs(q - qs).max()
+
+
+@pytest.mark.heavy
+def test_default_interface_footing_within_3_percent_at_5_cells():
+    """The library's defaults (interface="auto": pairs across the box footing, scaled by its
+    coverage), the footing's edge at a cell centre, 5.5 cells under B/2 (h = 0.5 / 5.5 m),
+    pushed to 0.8 s: the pressure from 0.5 s on within 3 % of (2 + pi) c_u (measured 1.0069;
+    the coverage interface, the default before 2026-12-07 late, 1.0599, docs/guide/contact.md)."""
+    from fenicsmpm.bench.bearing_capacity import implicit_cell_size
+    sim, q, _ = strip_footing(h=implicit_cell_size(0.1), comm=comm)
+    assert sim.integrator.interface == "auto"
+    t, p = [], []
+    sim.observe(lambda s: (t.append(s.t), p.append(q())), every=1)
+    sim.run(t_end=0.8, progress=False)
+    late = float(np.mean(np.array(p)[np.array(t) >= 0.5]))
+    print(f"\ndefault footing, 5.5 cells under B/2: q / (2 + pi) c_u = {late:.4f}")
+    assert abs(late - 1.0) < 0.03, late
