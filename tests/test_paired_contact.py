@@ -62,13 +62,16 @@ def test_update_ghosts_copies_the_owners_values():
     assert np.allclose(a, grid.node_x, atol=1e-12)
 
 
-def _footing_history(c):
+def _footing_history(c, h=0.25, **scene):
+    """Prandtl's footing with its edge at a cell centre (implicit_cell_size(h)), pushed to
+    0.8 s: the times and q / (2 + pi) c_u of every step, and the simulation (scene:
+    strip_footing's options)."""
     from fenicsmpm.bench.bearing_capacity import implicit_cell_size
-    sim, q, _ = strip_footing(h=implicit_cell_size(0.25), interface="paired", comm=c)
+    sim, q, _ = strip_footing(h=implicit_cell_size(h), comm=c, **scene)
     t, p = [], []
     sim.observe(lambda s: (t.append(s.t), p.append(q())), every=1)
     sim.run(t_end=0.8, progress=False)
-    return np.array(t), np.array(p)
+    return np.array(t), np.array(p), sim
 
 
 def test_paired_pairs_take_the_footings_coverage():
@@ -82,12 +85,12 @@ def test_paired_pairs_take_the_footings_coverage():
 
 
 def test_paired_footing_reaches_prandtl_and_matches_serial():
-    t, q = _footing_history(comm)
+    t, q, _ = _footing_history(comm, interface="paired")
     late = float(np.mean(q[t >= 0.5]))
     print(f"\npaired footing, 2.5 cells under B/2: q / (2 + pi) c_u = {late:.4f}")
     assert abs(late - 1.0) < 0.06, late
     if comm.size > 1:
-        ts, qs = _footing_history(MPI.COMM_SELF)
+        ts, qs, _ = _footing_history(MPI.COMM_SELF, interface="paired")
         assert len(ts) == len(t)
         assert np.allclose(q, qs, rtol=1e-6, atol=1e-9), np.abs(q - qs).max()
 
@@ -98,12 +101,8 @@ def test_default_interface_footing_within_3_percent_at_5_cells():
     coverage), the footing's edge at a cell centre, 5.5 cells under B/2 (h = 0.5 / 5.5 m),
     pushed to 0.8 s: the pressure from 0.5 s on within 3 % of (2 + pi) c_u (measured 1.0069;
     the coverage interface, the default before 2026-12-07 late, 1.0599, docs/guide/contact.md)."""
-    from fenicsmpm.bench.bearing_capacity import implicit_cell_size
-    sim, q, _ = strip_footing(h=implicit_cell_size(0.1), comm=comm)
+    t, q, sim = _footing_history(comm, h=0.1)
     assert sim.integrator.interface == "auto"
-    t, p = [], []
-    sim.observe(lambda s: (t.append(s.t), p.append(q())), every=1)
-    sim.run(t_end=0.8, progress=False)
-    late = float(np.mean(np.array(p)[np.array(t) >= 0.5]))
+    late = float(np.mean(q[t >= 0.5]))
     print(f"\ndefault footing, 5.5 cells under B/2: q / (2 + pi) c_u = {late:.4f}")
     assert abs(late - 1.0) < 0.03, late

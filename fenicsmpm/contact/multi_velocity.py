@@ -1043,9 +1043,10 @@ class ExplicitContact:
         return self._lattice_data
 
     def _coverage(self, sim):
-        """cover[i, b] of multi_velocity_contact: 1, or with interface="coverage" each rigid
-        body's coverage alpha_i of node i (module docstring "Coverage interface"), computed on
-        the owned nodes and copied to the ghosts."""
+        """cover[i, b] of multi_velocity_contact: 1, or for the rigid bodies of _covered
+        (interface "coverage", and the box-shaped ones with "paired" and "auto") their
+        coverage alpha_i of node i (module docstring "Coverage interface"), computed on the
+        owned nodes and copied to the ghosts."""
         grid = sim.grid
         n, nb = self._m_b.shape
         bodies = self._covered(sim)
