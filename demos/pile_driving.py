@@ -103,6 +103,7 @@ from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
+from fenicsmpm.collective import gmax, gmax_of, gmin_of, gsum
 from fenicsmpm.io import particle_raster, raster_shape
 from fenicsmpm.materials.hypoplastic import geostatic
 
@@ -162,18 +163,6 @@ def hammer(t0, period=T_PERIOD):
     return on
 
 
-def _gsum(x):
-    return comm.allreduce(float(x), op=MPI.SUM)
-
-
-def _gmin(x):
-    return comm.allreduce(float(x), op=MPI.MIN)
-
-
-def _gmax(x):
-    return comm.allreduce(float(x), op=MPI.MAX)
-
-
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", default="results/pile_driving", help="output directory")
@@ -209,29 +198,29 @@ def main(argv=None):
                       normal=args.normal, shape=args.shape)
     p = sim.particles
     pile = p.material_id == PILE
-    mass0 = _gsum(p.mass.sum())
-    ztop = _gmax(p.x[pile, 1].max() if np.any(pile) else -np.inf)
-    ztip = _gmin(p.x[pile, 1].min() if np.any(pile) else np.inf)
+    mass0 = gsum(comm, p.mass.sum())
+    ztop = gmax_of(comm, p.x[pile, 1])
+    ztip = gmin_of(comm, p.x[pile, 1])
     p.add_field("head")[:] = pile & (p.x[:, 1] > ztop - 0.25 * h)
     p.add_field("tip")[:] = pile & (p.x[:, 1] < ztip + 0.25 * h)
-    n_head = _gsum(p.head.sum())
-    n_pile = _gsum(pile.sum())
+    n_head = gsum(comm, p.head.sum())
+    n_pile = gsum(comm, pile.sum())
     hist = []
 
     def uz(field):
         sel = getattr(sim.particles, field) > 0
-        return _gsum(sim.particles.u[sel, 1].sum()) / _gsum(sel.sum())
+        return gsum(comm, sim.particles.u[sel, 1].sum()) / gsum(comm, sel.sum())
 
     def record(s):
         q = s.particles
         fc = s.integrator.contact_force
         own = s.grid.n_owned_nodes
         pl = q.material_id == PILE
-        zt = _gmin(q.x[pl, 1].min() if np.any(pl) else np.inf)
+        zt = gmin_of(comm, q.x[pl, 1])
         f = fc[:own, PILE, 1] if fc is not None else np.zeros(own)
         at_tip = s.grid.node_x[:own, 1] < zt + 0.5 * h
         hist.append((s.t, uz("head"), uz("tip"),
-                     2 * math.pi * _gsum(f.sum()), 2 * math.pi * _gsum(f[at_tip].sum())))
+                     2 * math.pi * gsum(comm, f.sum()), 2 * math.pi * gsum(comm, f[at_tip].sum())))
 
     sim.observe(record, every=5)     # u: displacement since t = 0 (never reset)
     t0 = time.perf_counter()
@@ -240,10 +229,10 @@ def main(argv=None):
     soil_p = p.material_id == SOIL
     settle_head, settle_tip = -uz("head"), -uz("tip")
     base = soil_p & (p.x[:, 1] < 0.5 * h)
-    sv_base = _gsum(p.stress[base, 1, 1].sum()) / _gsum(base.sum())
-    sv_exact = -RHO_SOIL * G * (H_SOIL - _gsum(p.x[base, 1].sum()) / _gsum(base.sum()))
+    sv_base = gsum(comm, p.stress[base, 1, 1].sum()) / gsum(comm, base.sum())
+    sv_exact = -RHO_SOIL * G * (H_SOIL - gsum(comm, p.x[base, 1].sum()) / gsum(comm, base.sum()))
     far = soil_p & (p.x[:, 0] > R_SOIL - h) & (p.x[:, 1] > H_SOIL - 0.5 * h)
-    settle_surface = -_gsum(p.u[far, 1].sum()) / max(_gsum(far.sum()), 1)
+    settle_surface = -gsum(comm, p.u[far, 1].sum()) / max(gsum(comm, far.sum()), 1)
     # hammer blows (the pile head load follows the head particles)
     t_b = sim.t
     on = hammer(t_b, period)
@@ -260,7 +249,7 @@ def main(argv=None):
     for k in range(blows):
         sim.run(t_end=t_b + (k + 1) * period, progress=None)
         per_blow.append(-uz("head"))
-    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    wall = gmax(comm, time.perf_counter() - t0)
     ht = np.array(hist)
     pen = list(np.diff([settle_head] + per_blow))
     blow_res = []
@@ -277,7 +266,7 @@ def main(argv=None):
     pr = np.maximum(-np.trace(p.stress[soil_p], axis1=1, axis2=2) / 3.0, 0.0)
     ed, ec, ei = soil.characteristic_void_ratios(pr)
     on_pile = p.material_id == PILE
-    zt = _gmin(p.x[on_pile, 1].min() if np.any(on_pile) else np.inf)
+    zt = gmin_of(comm, p.x[on_pile, 1])
     near = (p.x[soil_p, 0] < 1.0) & (np.abs(p.x[soil_p, 1] - zt) < 1.0)
     finite = (np.all(np.isfinite(p.stress)) and np.all(np.isfinite(p.x))
               and np.all(np.isfinite(p.state[soil_p])))
@@ -291,15 +280,15 @@ def main(argv=None):
                sigma_v_base=sv_base, sigma_v_base_exact=sv_exact,
                head_settlement_after_blow=per_blow, penetration_per_blow=pen,
                resistance_peak=blow_res,
-               e_min=_gmin(e.min() if len(e) else np.inf), e_max=_gmax(e.max() if len(e) else -np.inf),
-               e_min_near_tip=_gmin(e[near].min() if np.any(near) else np.inf),
-               e_max_near_tip=_gmax(e[near].max() if np.any(near) else -np.inf),
-               n_below_e_d=int(_gsum(np.count_nonzero(e < ed * (1 - 1e-6)))),
-               n_above_e_i=int(_gsum(np.count_nonzero(e > ei * (1 + 1e-6)))),
-               e_d_min=_gmin(ed.min() if len(ed) else np.inf),
-               mass_change=_gsum(p.mass.sum()) / mass0 - 1.0,
+               e_min=gmin_of(comm, e), e_max=gmax_of(comm, e),
+               e_min_near_tip=gmin_of(comm, e[near]),
+               e_max_near_tip=gmax_of(comm, e[near]),
+               n_below_e_d=int(gsum(comm, np.count_nonzero(e < ed * (1 - 1e-6)))),
+               n_above_e_i=int(gsum(comm, np.count_nonzero(e > ei * (1 + 1e-6)))),
+               e_d_min=gmin_of(comm, ed),
+               mass_change=gsum(comm, p.mass.sum()) / mass0 - 1.0,
                finite=bool(comm.allreduce(bool(finite), op=MPI.LAND)),
-               projections=int(_gsum(soil.stats[1])),
+               projections=int(gsum(comm, soil.stats[1])),
                history=ht.tolist())
     # the void ratio near the pile for the plot: rasters of squares of 1.5 particle spacings
     # (the soil's mean e, the pile's cells in black)

@@ -137,8 +137,8 @@ def test_auto_takes_boxes_on_cells_of_any_aspect_ratio():
         sim = fm.Simulation(grid, p, fm.ExplicitContact("MUSL", rigid={1: (0.0, -0.1)}),
                             dt="auto")
         sim.run(steps=1, progress=False)
-        chosen.append(sim.integrator._covered(sim))
-    assert chosen == [(1,), ()], chosen
+        chosen.append(sim.integrator._interface_bodies(sim))
+    assert chosen == [((1,), (1,)), ((), ())], chosen
 
 
 def test_wedge_default_interface_keeps_the_soil_out():

@@ -40,6 +40,7 @@ GROUPS = [
 ]
 MODULES = [
     ("fenicsmpm.partition", "Deterministic MPI mesh partitioners"),
+    ("fenicsmpm.collective", "Reductions over the ranks"),
     ("fenicsmpm.materials.element_test", "Element tests of materials"),
     ("fenicsmpm.materials.initial_stress", "Initial (K0) stress"),
     ("fenicsmpm.boundaries.friction", "Rough and frictional bases"),

@@ -40,6 +40,7 @@ import time
 import numpy as np
 
 from . import common
+from ..collective import gmax, gmax_of, gmin_of
 
 CASE = "plasticity"
 DT_FACTOR = 10.0
@@ -52,14 +53,6 @@ SIZES = dict(full=dict(collapse=dict(h=0.4, dt=1e-3, t_end=2.5),
                        slope=dict(cells=(50, 27), t_end=12.0)),
              quick=dict(collapse=dict(h=0.8, dt=2e-3, t_end=1.0),
                         slope=dict(cells=(20, 11), t_end=8.0)))
-
-
-def _gmin(comm, x):
-    return common.gmin(comm, float(x))
-
-
-def _gmax(comm, x):
-    return common.gmax(comm, float(x))
 
 
 def build_collapse(comm, integrator, h, dt):
@@ -136,16 +129,16 @@ def run_scene(scene, kind, size, comm, t_end=None):
         sim.run(t_end=t_end, progress=False)
     except (RuntimeError, FloatingPointError) as err:
         error = f"{scene}/{kind}: {err}"
-    wall = _gmax(comm, time.perf_counter() - t0)
+    wall = gmax(comm, time.perf_counter() - t0)
     finite = comm.allreduce(bool(np.all(np.isfinite(p.x)) and np.all(np.isfinite(p.stress))))
     finite = finite == comm.size
     if scene == "collapse":
-        lo = _gmin(comm, p.x[:, 0].min() if len(p) else np.inf)
-        hi = _gmax(comm, p.x[:, 0].max() if len(p) else -np.inf)
+        lo = gmin_of(comm, p.x[:, 0])
+        hi = gmax_of(comm, p.x[:, 0])
         runout = 0.5 * (hi - lo - COLLAPSE["W"])
         crest_u = None
     else:
-        runout = _gmax(comm, np.abs(p.u[:, 0]).max() if len(p) else 0.0)
+        runout = gmax(comm, float(np.abs(p.u[:, 0]).max()) if len(p) else 0.0)
         d = crest.data()
         crest_u = float(np.hypot(d["displacement_x"][-1], d["displacement_y"][-1]))
     iters = list(getattr(integ, "iterations", []))
@@ -156,7 +149,7 @@ def run_scene(scene, kind, size, comm, t_end=None):
                    dt_cuts=steps - sim.step_count if iters else 0,
                    runout=runout, t_reached=float(sim.t),
                    completed=int(error is None and sim.t >= t_end - 1e-9),
-                   max_plastic_strain=_gmax(comm, p.state[:, 0].max() if len(p) else 0.0),
+                   max_plastic_strain=gmax(comm, float(p.state[:, 0].max()) if len(p) else 0.0),
                    mean_speed_final=sim.particles.mean_speed(), finite=int(finite))
     if crest_u is not None:
         metrics["crest_u"] = crest_u

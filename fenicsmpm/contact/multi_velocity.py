@@ -978,27 +978,31 @@ class ExplicitContact:
                 if not self._is_rigid[b]:
                     v_b[:, b, :] *= free
 
-    def _uses(self, interface, grid):
-        """Whether `interface` ("paired", "coverage") can act: it is the chosen one ("auto"
-        chooses "paired", against box-shaped bodies only: _pairs), there is a rigid body, the
-        gap check is on and the grid is an axis-aligned lattice (else the node-wise
-        projection everywhere)."""
-        chosen = "paired" if self.interface == "auto" else self.interface
-        return (chosen == interface and bool(self.rigid) and self.gap is not None
-                and self.algorithm == "multi-velocity" and grid.structured)
-
-    def _covered(self, sim):
-        """The rigid bodies whose corrections are scaled by their coverage (_coverage): all of
-        them with interface="coverage", with "auto" those whose particle domains fill an
-        axis-aligned box (the domains, boxes of the cell's aspect ratio and the particle's
-        volume as shapes.gimp.initial_half_widths makes them, summed equal their bounding
-        box to BOX_TOL; on axisymmetric grids in the meridian plane; decided at the first
-        step, collective); with "paired" those boxes too (the pairs' impulses scaled by the
-        coverage of their R-side node); none where the interface does not act (_uses)."""
-        if not (self._uses("coverage", sim.grid) or self._uses("paired", sim.grid)):
-            return ()
+    def _interface_bodies(self, sim):
+        """The one place the interface is decided: (paired, covered), the rigid bodies whose
+        nodes pair across their surface (_pairs) and those whose corrections are scaled by
+        their coverage (_coverage):
+            "auto"      the box-shaped rigid bodies (_box_bodies), both;
+            "paired"    every rigid body paired, the box-shaped ones covered (the pairs'
+                        impulses scaled by the coverage of their R-side node);
+            "coverage"  none paired, every rigid body covered;
+            "node"      none.
+        None of either without a rigid body, with the gap check off, with penalty contact or
+        on a grid that is not an axis-aligned lattice (the node-wise projection everywhere).
+        Collective at the first step (_box_bodies)."""
+        if not (self.interface != "node" and self.rigid and self.gap is not None
+                and self.algorithm == "multi-velocity" and sim.grid.structured):
+            return (), ()
         if self.interface == "coverage":
-            return tuple(self.rigid)
+            return (), tuple(self.rigid)
+        boxes = self._box_bodies(sim)
+        return (tuple(self.rigid) if self.interface == "paired" else boxes), boxes
+
+    def _box_bodies(self, sim):
+        """The rigid bodies whose particle domains fill an axis-aligned box (the domains, boxes
+        of the cell's aspect ratio and the particle's volume as shapes.gimp.initial_half_widths
+        makes them, summed equal their bounding box to BOX_TOL; on axisymmetric grids in the
+        meridian plane); decided at the first step (collective) and kept."""
         if self._boxes is None:
             p, d = sim.particles, sim.gdim
             body = body_ids(p)
@@ -1043,13 +1047,12 @@ class ExplicitContact:
         return self._lattice_data
 
     def _coverage(self, sim):
-        """cover[i, b] of multi_velocity_contact: 1, or for the rigid bodies of _covered
-        (interface "coverage", and the box-shaped ones with "paired" and "auto") their
-        coverage alpha_i of node i (module docstring "Coverage interface"), computed on the
-        owned nodes and copied to the ghosts."""
+        """cover[i, b] of multi_velocity_contact: 1, or for the covered rigid bodies
+        (_interface_bodies) their coverage alpha_i of node i (module docstring "Coverage
+        interface"), computed on the owned nodes and copied to the ghosts."""
         grid = sim.grid
         n, nb = self._m_b.shape
-        bodies = self._covered(sim)
+        bodies = self._interface_bodies(sim)[1]
         if not bodies:
             if getattr(self, "_ones", None) is None or self._ones.shape != (n, nb):
                 self._ones = np.ones((n, nb))
@@ -1070,14 +1073,14 @@ class ExplicitContact:
         return cover
 
     def _pairs(self, sim):
-        """interface="paired" (paired_rigid_contact; "auto": against the box-shaped rigid bodies
-        of _covered only, the others node-wise): the nodes it handles, with the presence
+        """The paired interface (paired_rigid_contact) against the paired rigid bodies of
+        _interface_bodies, the others node-wise: the nodes it handles, with the presence
         mask the node-wise projection then sees (their rigid body removed), each node's
-        deformable and rigid body, the lattice neighbours and spacing; None where it does not
-        apply (interface="node", no rigid body, the gap check off, or a grid that is not an
-        axis-aligned lattice: the node-wise projection everywhere)."""
+        deformable and rigid body, the lattice neighbours and spacing; None where no body is
+        paired."""
         grid = sim.grid
-        if not self._uses("paired", grid):
+        paired = self._interface_bodies(sim)[0]
+        if not paired:
             return None
         present, rig = self._present, self._is_rigid
         n_def = (present & ~rig).sum(axis=1)
@@ -1086,7 +1089,7 @@ class ExplicitContact:
         body_r = np.argmax(present & rig, axis=1).astype(np.int32)
         idx = np.arange(len(present))
         boxed = np.zeros(self.nb, dtype=bool)
-        boxed[list(self._covered(sim) if self.interface == "auto" else self.rigid)] = True
+        boxed[list(paired)] = True
         cand = ((n_def == 1) & (n_rig == 1) & boxed[body_r]
                 & np.isfinite(self._lo_b[idx, body_r])
                 & np.isfinite(self._hi_b[idx, body_a])

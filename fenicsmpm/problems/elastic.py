@@ -8,6 +8,7 @@ import numpy as np
 from mpi4py import MPI
 from dolfinx import mesh as dmesh
 
+from ..collective import gmax, gmax_of
 from ..grid import Grid, vertex_ghost_partitioner
 from ..integrators import DoubleMappingQuasiStatic, QuasiStatic
 from ..materials import LinearElastic
@@ -133,12 +134,12 @@ def self_weight_errors(method="dmgc", shape="ugimp", n_cells=10, per_cell=2, loa
     comm.barrier()
     t0 = time.perf_counter()
     sim.run(steps=load_steps, progress=False)
-    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
+    wall = gmax(comm, time.perf_counter() - t0)
     p = sim.particles
     Y = (p.x - p.u)[:, 1]
     M = mat.constrained_modulus
     ua = -density * g * (height * Y - 0.5 * Y ** 2) / M
-    ytop = comm.allreduce(float(Y.max()) if len(Y) else -np.inf, op=MPI.MAX)
+    ytop = gmax_of(comm, Y)
     top = np.abs(Y - ytop) < 1e-9 * height
     loc = np.array([np.sum(np.abs(p.stress[:, 1, 1] + density * g * (height - Y)) * p.V0),
                     np.sum(p.V0), np.sum(p.V0 * (p.u[:, 1] - ua) ** 2), np.sum(p.V0 * ua ** 2),

@@ -13,6 +13,8 @@ Lube et al.'s law for the run-out (L_inf - L0) / L0 and the final height H_inf /
     H_inf / L0        = a              (a < 1.15),  a^(2/5)       (a > 1.15)."""
 import numpy as np
 
+from ..collective import gmax_of
+
 PHI = 30.0
 G = 9.81
 
@@ -65,14 +67,13 @@ def run_to_rest(sim, T, t_max, chunk, front, scale):
     0.5 % of `scale` and the mean speed is below 5 % of its peak; at most t_max T.  `front`:
     the initial front.  Returns (history [(t / T, mean speed)], the error message of a
     stopped run or None, t_rest / T or nan).  Collective."""
-    from mpi4py import MPI
     p, comm = sim.particles, sim.comm
     hist, error, t_rest = [(0.0, 0.0)], None, float("nan")
     try:
         while sim.t < t_max * T - 1e-9:
             sim.run(t_end=min(sim.t + chunk * T, t_max * T), progress=False)
             hist.append((sim.t / T, p.mean_speed()))
-            new = comm.allreduce(float(np.max(p.x[:, 0])) if len(p.x) else -np.inf, op=MPI.MAX)
+            new = gmax_of(comm, p.x[:, 0])
             speeds = [s for _, s in hist]
             if (np.argmax(speeds) < len(speeds) - 1 and new - front < 5e-3 * scale
                     and speeds[-1] < 0.05 * max(speeds)):
@@ -98,12 +99,9 @@ def collapse(a, cells=16, t_max=8.0, chunk=0.25, comm=None, **scene):
     p = sim.particles
     T = np.sqrt(H0 / G)
 
-    def gmax(x):
-        return comm.allreduce(float(np.max(x)) if len(x) else -np.inf, op=MPI.MAX)
-
     hist, error, t_rest = run_to_rest(sim, T, t_max, chunk, L0, L0)
-    runout = (gmax(p.x[:, 0]) - L0) / L0
-    height = gmax(p.x[:, 1]) / L0
+    runout = (gmax_of(comm, p.x[:, 0]) - L0) / L0
+    height = gmax_of(comm, p.x[:, 1]) / L0
     t, s = np.array(hist).T
     return dict(a=a, cells=cells, shape=sim.shape, dt=sim.dt, runout=runout, height=height,
                 runout_error=runout / lube_runout(a) - 1.0,

@@ -15,6 +15,7 @@ import time
 import numpy as np
 from dolfinx import mesh as dmesh
 
+from ..collective import gmax, gsum
 from ..grid import Grid
 from ..integrators import QuasiStatic
 from ..materials import VonMises
@@ -34,15 +35,6 @@ def soil(length=None, m=2.0, softening=True):
     softening=False keeps the peak strength c_u (perfectly plastic)."""
     kw = dict(W5_SOIL) if softening else dict(W5_SOIL, c_res=W5_SOIL["c_u"], H=0.0)
     return VonMises(**kw, nonlocal_length=length if softening else None, nonlocal_m=m)
-
-
-def _gsum(comm, x):
-    return comm.allreduce(x) if comm.size > 1 else x
-
-
-def _gmax(comm, x):
-    from mpi4py import MPI
-    return comm.allreduce(x, op=MPI.MAX) if comm.size > 1 else x
 
 
 def _run(sim, steps, record):
@@ -91,24 +83,24 @@ def shear_layer(h, length=None, comm=None, height=0.2, width=0.02, u_end=0.006, 
     sim = shear_layer_simulation(h, length, comm, height, width, u_end, steps, m, weak, material)
     comm, qs = sim.comm, sim.integrator
     p = sim.particles
-    vol0 = _gsum(comm, float(p.V.sum()))
+    vol0 = gsum(comm, float(p.V.sum()))
     u, tau = [0.0], [0.0]
 
     def record():
         u.append(u_end * sim.t)
-        tau.append(_gsum(comm, float(np.sum(p.V * p.stress[:, 0, 1]))) / vol0)
+        tau.append(gsum(comm, float(np.sum(p.V * p.stress[:, 0, 1]))) / vol0)
 
     t0 = time.perf_counter()
     done, msg = _run(sim, steps, record)
-    wall = _gmax(comm, time.perf_counter() - t0)
+    wall = gmax(comm, time.perf_counter() - t0)
     eps = p.state[:, 0]
-    emax = _gmax(comm, float(eps.max()) if len(p) else 0.0)
-    band = _gsum(comm, float(np.sum(p.V * eps))) / (width * emax) if emax > 0 else 0.0
+    emax = gmax(comm, float(eps.max()) if len(p) else 0.0)
+    band = gsum(comm, float(np.sum(p.V * eps))) / (width * emax) if emax > 0 else 0.0
     return dict(h=h, length=length, u=np.array(u), tau=np.array(tau), completed=done,
                 stopped=msg, band_width=band, eps_max=emax,
                 newton=list(qs.iterations), wall_s=wall,
-                nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
-                n_particles=_gsum(comm, len(p)), ids=p.id.copy(), state=p.state.copy(),
+                nonlocal_s=gmax(comm, sim.timers.get("nonlocal", 0.0)),
+                n_particles=gsum(comm, len(p)), ids=p.id.copy(), state=p.state.copy(),
                 stress=p.stress.copy(), x0=p.x - p.u)
 
 
@@ -257,21 +249,21 @@ def strip_footing(h, length=None, comm=None, settlement=0.1, steps=50, width=6.0
     def record():
         s.append(settlement * sim.t)
         if footing == "nodes":
-            pr.append(-_gsum(comm, float(sim.nodal["reaction"][own, 1].sum())) / half_width)
+            pr.append(-gsum(comm, float(sim.nodal["reaction"][own, 1].sum())) / half_width)
         else:
             pr.append(-float(sim.particle_reaction(0)[1]) / half_width)
 
     t0 = time.perf_counter()
     done, msg = _run(sim, steps, record)
-    wall = _gmax(comm, time.perf_counter() - t0)
+    wall = gmax(comm, time.perf_counter() - t0)
     eps = p.state[:, 0]
-    emax = _gmax(comm, float(eps.max()) if len(p) else 0.0)
-    band = (_gsum(comm, float(np.sum(p.V * eps))) / (emax * prandtl_band_length(half_width))
+    emax = gmax(comm, float(eps.max()) if len(p) else 0.0)
+    band = (gsum(comm, float(np.sum(p.V * eps))) / (emax * prandtl_band_length(half_width))
             if emax > 0 else 0.0)
     return dict(h=h, length=length, settlement=np.array(s), pressure=np.array(pr),
                 half_width=half_width,
                 half_width_effective=effective_half_width(h, half_width, footing),
                 completed=done, stopped=msg, band_width=band, eps_max=emax,
                 newton=list(qs.iterations), wall_s=wall,
-                nonlocal_s=_gmax(comm, sim.timers.get("nonlocal", 0.0)),
-                n_particles=_gsum(comm, len(p)))
+                nonlocal_s=gmax(comm, sim.timers.get("nonlocal", 0.0)),
+                n_particles=gsum(comm, len(p)))

@@ -16,6 +16,8 @@ The run-out is the distance from the toe to the farthest particle centre once th
 at rest (granular_collapse.run_to_rest, T = sqrt(H / g))."""
 import numpy as np
 
+from ..collective import gmax, gmax_of
+
 H, CREST, X_TOE, LENGTH = 10.0, 5.0, 15.0, 50.0
 G = 9.81
 SOIL = dict(E=20e6, nu=0.3, density=2000.0, phi=20.0, c=5e3, psi=0.0, phi_res=10.0,
@@ -79,10 +81,10 @@ def runout(cells=16, material=None, t_max=15.0, chunk=0.25, comm=None, **sim_opt
     p = sim.particles
     t0 = time.perf_counter()
     hist, error, t_rest = run_to_rest(sim, np.sqrt(H / G), t_max, chunk, X_TOE, H)
-    wall = comm.allreduce(time.perf_counter() - t0, op=MPI.MAX)
-    front = comm.allreduce(float(np.max(p.x[:, 0])) if len(p.x) else -np.inf, op=MPI.MAX)
+    wall = gmax(comm, time.perf_counter() - t0)
+    front = gmax_of(comm, p.x[:, 0])
     return dict(cells=cells, h=H / cells, runout=front - X_TOE, t_rest=t_rest,
                 t_end=sim.t / np.sqrt(H / G), steps=sim.step_count, dt=sim.dt,
                 particles=p.n_global(), wall_s=wall,
-                nonlocal_s=comm.allreduce(sim.timers.get("nonlocal", 0.0), op=MPI.MAX),
+                nonlocal_s=gmax(comm, sim.timers.get("nonlocal", 0.0)),
                 finished=error is None, error=error)
