@@ -331,20 +331,32 @@ def flip_blend(D, nodes, N, old, new, flip, q):
         _flip_blend(D, nodes, N, old, new, flip, q, lo, hi)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def particle_dF(D, nodes, dN, w, scale, p, out):
     """out = I + scale * sum_a w_(nodes[p, a]) (x) grad N_a(x_p) for particle p (3x3 out; plane
-    strain in 2D)."""
-    d = len(D)
+    strain in 2D). Inlined into its passes; in 2D the in-plane block is summed in scalars
+    (the same sums)."""
     for i in range(3):
         for j in range(3):
             out[i, j] = 1.0 if i == j else 0.0
+    if len(D) == 3:
+        for a in range(row_length(nodes, p)):
+            n = nodes[p, a]
+            for i in range(3):
+                wi = scale * w[n, i]
+                for j in range(3):
+                    out[i, j] += wi * dN[p, a, j]
+        return
+    f00, f01, f10, f11 = 1.0, 0.0, 0.0, 1.0
     for a in range(row_length(nodes, p)):
         n = nodes[p, a]
-        for i in range(d):
-            wi = scale * w[n, i]
-            for j in range(d):
-                out[i, j] += wi * dN[p, a, j]
+        b0, b1 = dN[p, a, 0], dN[p, a, 1]
+        w0, w1 = scale * w[n, 0], scale * w[n, 1]
+        f00 += w0 * b0
+        f01 += w0 * b1
+        f10 += w1 * b0
+        f11 += w1 * b1
+    out[0, 0], out[0, 1], out[1, 0], out[1, 1] = f00, f01, f10, f11
 
 
 @njit(cache=True)
@@ -648,7 +660,7 @@ def inversion_flag(J):
     return 1 if np.isfinite(J) else 2
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def commit_particle(dF, sigma_new, J, p, F, V, sigma, work, tmp):
     """Accept particle p's step (dF, its stress sigma_new, J = det dF > 0): work += the
     trapezoidal stress work, V <- J V, F <- dF F, sigma <- sigma_new (tmp: 3x3 scratch)."""
