@@ -812,7 +812,7 @@ def add_block(data, base, deg, i, j, d, constrained, block):
                 data[base + r * deg * d + c] += block[r, c]
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def stiffness_stage(dN, A, p, m, scale, G):
     """G[a, r, c, L] = scale sum_J grad N_ap,J A_p[r, J, c, L] for the first m nodes a of
     particle p: the first stage of a particle's stiffness blocks (block (a, b)[r, c] =
