@@ -203,11 +203,21 @@ def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
     add_chunks2(out, buf, rng)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _affine_momentum(D, nodes, N, mass, v, C, xp, node_x, p, mv_out):
     """(m v)_i += N_ip m_p (v_p + C_p (x_i - xp)) over particle p's nodes (xp: its position
     at the start of the step)."""
     d = len(D)
+    if d == 2:                     # the 2D sums in scalars, in the same order
+        v0, v1, x0, x1 = v[p, 0], v[p, 1], xp[0], xp[1]
+        c00, c01, c10, c11 = C[p, 0, 0], C[p, 0, 1], C[p, 1, 0], C[p, 1, 1]
+        for a in range(row_length(nodes, p)):
+            w = N[p, a] * mass[p]
+            i = nodes[p, a]
+            r0, r1 = node_x[i, 0] - x0, node_x[i, 1] - x1
+            mv_out[i, 0] += w * (v0 + c00 * r0 + c01 * r1)
+            mv_out[i, 1] += w * (v1 + c10 * r0 + c11 * r1)
+        return
     for a in range(row_length(nodes, p)):
         w = N[p, a] * mass[p]
         i = nodes[p, a]
@@ -509,7 +519,7 @@ def _g2p_momentum_chunks(nc, D, nodes, N, du, v_old, v_new, flip, x, v, u, mass,
     add_chunks2(mv_out, buf, rng)
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _affine_matrix(D, nodes, N, dN, node_x, v_new, x, p, C):
     """C_p = B_p D_p^-1 of g2p_affine for particle p (closed-form inverse, no allocation),
     or sum v_i (x) grad N_ip where D_p is singular."""
