@@ -281,21 +281,29 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         kt.p2g_weighted(self.grid.D, self.nodes, self.N, self.particles.mass, q, out)
         return out
 
-    def active_mask(self, m):
+    def active_mask(self, m, restrict=True):
         """Active nodes: mass above mass_tolerance times the global largest nodal mass.
 
         Also restricts the particles' shape gradients to the active nodes (see
-        kernels.transfer.restrict_gradients), so all later stages use consistent gradients."""
+        kernels.transfer.restrict_gradients), so all later stages use consistent gradients;
+        restrict=False leaves that to the caller's next internal_force(..., active=...),
+        which applies it in its own particle pass (before any other use of the gradients)."""
         mmax = m.max() if len(m) else 0.0
         if self.comm.size > 1:
             from mpi4py import MPI
             mmax = self.comm.allreduce(mmax, op=MPI.MAX)
         active = m > self.mass_tolerance * mmax
+        if restrict:
+            self.restrict_gradients(active)
+        return active
+
+    def restrict_gradients(self, active):
+        """Restrict the particles' shape gradients to the active nodes
+        (kernels.transfer.restrict_gradients; timed as "shape")."""
         t0 = time.perf_counter()
         kt.restrict_gradients(self.grid.D, self.nodes, self.N, self.dN, active[:, None],
                               np.zeros(len(self.nodes), dtype=np.int64))
         self.timers["shape"] += time.perf_counter() - t0
-        return active
 
     def external_force(self, t, m, gravity_scale=1.0, active=None):
         """Nodal external force, already summed over ranks: gravity sum_p N_ip m_p g = m_i g
@@ -364,15 +372,20 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         fbar(group, p.V, dF, self.grid.n_cells * n_bodies,
              3 if self.gdim == 3 or self.axisymmetric else 2)
 
-    def internal_force(self, stress, out, volume=None):
-        """out += -sum_p V_p stress_p . grad N_ip (no body force)."""
+    def internal_force(self, stress, out, volume=None, active=None):
+        """out += -sum_p V_p stress_p . grad N_ip (no body force). active: the mask of an
+        active_mask(m, restrict=False) call, whose gradient restriction this applies first
+        (in the force's particle pass)."""
         p = self.particles
         if self.force_integration == "mixed":
+            if active is not None:
+                self.restrict_gradients(active)
             from .integrators.mixed_integration import internal_force as mixed_force
             mixed_force(self, stress, out, volume)
             return
         V = p.V if volume is None else volume
-        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, V, stress, np.zeros(self.gdim), out)
+        kt.p2g_force(self.grid.D, self.nodes, self.N, self.dN, p.mass, V, stress,
+                     np.zeros(self.gdim), out, None if active is None else active[:, None])
         if self.axisymmetric:
             axi.hoop_force(self.nodes, self.N, self._field, V, stress, self._r, out[:, None, :])
 

@@ -51,6 +51,25 @@ def _bufs(nc, *outs):
     return [np.full((nc - 1,) + o.shape, np.nan) for o in outs]
 
 
+@pytest.mark.parametrize("nc", [1, 2, 3])
+def test_force_pass_restricts_as_the_separate_pass(data, nc):
+    """p2g_force with the active-node mask restricts each row's gradients in its own pass:
+    the same gradients, bit for bit, as restrict_gradients before the force, and the same
+    force to round-off of the chunk sums (Simulation.active_mask(m, restrict=False) then
+    internal_force(..., active=...), the explicit MUSL/USL step)."""
+    D, nodes, N, nn, d = (data[k] for k in ("D", "nodes", "N", "nn", "d"))
+    active = np.random.default_rng(3).random(nn) > 0.2        # a fifth of the nodes inactive
+    dN0, dN1 = data["dN"].copy(), data["dN"].copy()
+    kt.restrict_gradients(D, nodes, N, dN0, active[:, None], np.zeros(len(nodes), dtype=np.int64))
+    assert not np.array_equal(dN0, data["dN"])
+    args = (data["mass"], data["V"], data["S"], data["g"], np.zeros((0, 1), dtype=np.bool_))
+    f0, f1 = np.zeros((nn, d)), np.zeros((nn, d))
+    kt._force(D, nodes, N, dN0, *args, 0, data["n"], f0)
+    kt._p2g_force_chunks(nc, D, nodes, N, dN1, *args[:-1], active[:, None], f1, *_bufs(nc, f1))
+    assert np.array_equal(dN1, dN0)
+    assert _rel(f1, f0) < 1e-14
+
+
 @pytest.mark.parametrize("nc", [2, 3, 5])
 def test_p2g_chunks_match_serial(data, nc):
     """P2G with nc chunks (per-chunk nodal arrays, added afterwards) equals one pass."""
@@ -63,7 +82,8 @@ def test_p2g_chunks_match_serial(data, nc):
     kt._p2g_mass_momentum_chunks(nc, D, nodes, N, m, v, m1, mv1, *_bufs(nc, m1, mv1))
     assert _rel(m1, m0) < 1e-14 and _rel(mv1, mv0) < 1e-14
     f0, f1 = np.ones((nn, d)), np.ones((nn, d))
-    args = (D, nodes, N, data["dN"], m, data["V"], data["S"], data["g"])
+    args = (D, nodes, N, data["dN"], m, data["V"], data["S"], data["g"],
+            np.zeros((0, 1), dtype=np.bool_))
     kt._force(*args, 0, n, f0)
     kt._p2g_force_chunks(nc, *args, f1, *_bufs(nc, f1))
     assert _rel(f1, f0) < 1e-14

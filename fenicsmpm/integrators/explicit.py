@@ -237,7 +237,10 @@ class Explicit:
         m, mv = self._p2g(sim)
         grid.accumulate(m, mv)
         T["p2g"] += time.perf_counter() - t0
-        active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
+        # the gradients' restriction to the active nodes: here (timed as "shape") where the
+        # stress is updated before the internal force, else in the force's pass ("p2g")
+        early = self.scheme in ("USF", "AVG")
+        active = sim.active_mask(m, restrict=early)
         t0 = time.perf_counter()
         inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
         free = ~sim.fixed
@@ -252,7 +255,7 @@ class Explicit:
             sim.stress_update(v0, dt if self.scheme == "USF" else 0.5 * dt)
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
-        sim.internal_force(sim.dynamic_stress(p.stress), f)
+        sim.internal_force(sim.dynamic_stress(p.stress), f, active=None if early else active)
         grid.accumulate(f)
         f_ext = sim.external_force(sim.t, m, active=active)
         f += f_ext

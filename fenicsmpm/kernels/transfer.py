@@ -154,9 +154,13 @@ def _p2g_weighted_chunks(nc, D, nodes, N, mass, q, out, buf):
 
 
 @njit(cache=True)
-def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out):
+def _force(D, nodes, N, dN, mass, V, stress, g, active, lo, hi, out):
+    restrict = active.shape[0] > 0
+    s3 = np.empty(len(D))
     if len(D) == 3:
         for p in range(lo, hi):
+            if restrict:
+                restrict_row(D, nodes, N, dN, active, 0, p, s3)
             for a in range(row_length(nodes, p)):
                 i = nodes[p, a]
                 for k in range(3):
@@ -167,6 +171,8 @@ def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out):
         return
     g0, g1 = g[0], g[1]
     for p in range(lo, hi):        # 2D: the in-plane stress in scalars (1.5x, the same sums)
+        if restrict:
+            restrict_row(D, nodes, N, dN, active, 0, p, s3)
         s00, s01, s10, s11 = stress[p, 0, 0], stress[p, 0, 1], stress[p, 1, 0], stress[p, 1, 1]
         mp, vp = mass[p], V[p]
         for a in range(row_length(nodes, p)):
@@ -177,29 +183,34 @@ def _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out):
             out[i, 1] += w * g1 - vp * (s10 * b0 + s11 * b1)
 
 
-def p2g_force(D, nodes, N, dN, mass, V, stress, g, out):
+def p2g_force(D, nodes, N, dN, mass, V, stress, g, out, active=None):
     """out_i += sum_p (N_ip m_p g - V_p stress_p . grad N_ip).
 
     `stress` is (n, 3, 3); only the in-plane block is used. With the first Piola stress of
-    the step and start-of-step gradients and volumes this is the updated-Lagrangian force."""
+    the step and start-of-step gradients and volumes this is the updated-Lagrangian force.
+    active: None, or the (n_nodes, 1) active-node mask whose gradient restriction
+    (restrict_gradients) this pass applies to dN first, particle by particle (one read of
+    the rows less than a separate pass)."""
     nc = n_chunks(len(nodes))
-    _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, scratch(0, nc - 1, out))
+    active = np.zeros((0, 1), dtype=np.bool_) if active is None else active
+    _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, active, out,
+                      scratch(0, nc - 1, out))
 
 
 @njit(parallel=PRANGE, cache=True)
-def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, out, buf):
+def _p2g_force_chunks(nc, D, nodes, N, dN, mass, V, stress, g, active, out, buf):
     n = nodes.shape[0]
     if nc == 1:
-        return _force(D, nodes, N, dN, mass, V, stress, g, np.int64(0), n, out)
+        return _force(D, nodes, N, dN, mass, V, stress, g, active, np.int64(0), n, out)
     rng = np.zeros((nc, 2), dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if c == 0:
-            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, out)
+            _force(D, nodes, N, dN, mass, V, stress, g, active, lo, hi, out)
         else:
             a, b = node_range(nodes, lo, hi, rng[c])
             buf[c - 1, a:b] = 0.0
-            _force(D, nodes, N, dN, mass, V, stress, g, lo, hi, buf[c - 1])
+            _force(D, nodes, N, dN, mass, V, stress, g, active, lo, hi, buf[c - 1])
     add_chunks2(out, buf, rng)
 
 
@@ -267,32 +278,38 @@ def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, m_out, mv_out, mb
 
 
 # ---------------------------------------------------------------------- per-particle passes
+@njit(cache=True, inline="always")
+def restrict_row(D, nodes, N, dN, active, f, p, s):
+    """Particle p's gradients restricted to the nodes active in column f (restrict_gradients);
+    s: scratch of length d. Returns at once when all its nodes are active."""
+    d = len(D)
+    m = row_length(nodes, p)
+    full = True
+    for a in range(m):
+        if not active[nodes[p, a], f]:
+            full = False
+    if full:
+        return
+    for k in range(d):
+        s[k] = 0.0
+    for a in range(m):
+        if active[nodes[p, a], f]:
+            for k in range(d):
+                s[k] += dN[p, a, k]
+    for a in range(m):
+        if active[nodes[p, a], f]:
+            for k in range(d):
+                dN[p, a, k] -= N[p, a] * s[k]
+        else:
+            for k in range(d):
+                dN[p, a, k] = 0.0
+
+
 @njit(cache=True)
 def _restrict(D, nodes, N, dN, active, field, lo, hi):
-    d = len(D)
-    s = np.empty(d)
+    s = np.empty(len(D))
     for p in range(lo, hi):
-        f = field[p]
-        full = True
-        m = row_length(nodes, p)
-        for a in range(m):
-            if not active[nodes[p, a], f]:
-                full = False
-        if full:
-            continue
-        for k in range(d):
-            s[k] = 0.0
-        for a in range(m):
-            if active[nodes[p, a], f]:
-                for k in range(d):
-                    s[k] += dN[p, a, k]
-        for a in range(m):
-            if active[nodes[p, a], f]:
-                for k in range(d):
-                    dN[p, a, k] -= N[p, a] * s[k]
-            else:
-                for k in range(d):
-                    dN[p, a, k] = 0.0
+        restrict_row(D, nodes, N, dN, active, field[p], p, s)
 
 
 @njit(parallel=PRANGE, cache=True)
