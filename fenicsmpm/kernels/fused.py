@@ -22,7 +22,7 @@ from numba import njit, prange
 from ..materials.linear_elastic import jaumann_update
 from ..materials.piola import det3, work_increment
 from .threads import PRANGE, chunk, particle_chunks
-from .transfer import commit_particle, inversion_flag, particle_dF
+from .transfer import commit_particle, inversion_flag, particle_dF, row_length
 
 
 @njit(cache=True)
@@ -47,17 +47,23 @@ def _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo, h
 
 
 @njit(cache=True)
-def _elastic_plane(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo, hi):
+def _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo, hi):
     """_elastic for plane strain (module docstring): the terms of particle_dF, det3,
     jaumann_update, work_increment and commit_particle that are not products with an exact
     zero, in their order (the in-plane blocks, m = 2)."""
     n_bad = 0
-    dF = np.empty((3, 3))
+    dF = np.eye(3)
     eps = np.empty((3, 3))
     om = np.empty((3, 3))
     s = np.empty((3, 3))
     for p in range(lo, hi):
-        particle_dF(D, nodes, dN, w, scale, p, dF)
+        dF[0, 0], dF[0, 1], dF[1, 0], dF[1, 1] = 1.0, 0.0, 0.0, 1.0
+        for a in range(row_length(nodes, p)):
+            n = nodes[p, a]
+            for i in range(2):
+                wi = scale * w[n, i]
+                for j in range(2):
+                    dF[i, j] += wi * dN[p, a, j]
         J = dF[0, 0] * dF[1, 1] - dF[0, 1] * dF[1, 0]
         flag = inversion_flag(J)
         if flag:
@@ -94,7 +100,7 @@ def elastic_step(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted):
     plane = len(D) == 2
     if nc == 1:
         if plane:
-            return _elastic_plane(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
+            return _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
                                   np.int64(0), n)
         return _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
                         np.int64(0), n)
@@ -102,8 +108,8 @@ def elastic_step(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted):
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
         if plane:
-            bad[c] = _elastic_plane(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work,
-                                    inverted, lo, hi)
+            bad[c] = _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
+                                    lo, hi)
         else:
             bad[c] = _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
                               lo, hi)
