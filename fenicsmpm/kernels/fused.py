@@ -89,28 +89,42 @@ def _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted, lo
     return n_bad
 
 
-@njit(parallel=PRANGE, cache=True)
 def elastic_step(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted):
     """dF from the nodal field w (times scale), the Jaumann linear-elastic stress and the commit
     of every particle in one pass (module docstring); a particle whose increment inverts it
     (flag 1) or is not finite (flag 2) keeps its state and is flagged in `inverted`, as
-    kernels.transfer.commit_step does. Returns their count. 2D: plane strain (_elastic_plane)."""
+    kernels.transfer.commit_step does. Returns their count. 2D: plane strain (_elastic_plane).
+    The two dimensions are two compiled passes, so a 2D run compiles only its own."""
+    if len(D) == 2:
+        return _plane_step(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted)
+    return _step_3d(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted)
+
+
+@njit(parallel=PRANGE, cache=True)
+def _plane_step(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted):
     n = nodes.shape[0]
     nc = particle_chunks(n)
-    plane = len(D) == 2
     if nc == 1:
-        if plane:
-            return _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
-                                  np.int64(0), n)
+        return _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
+                              np.int64(0), n)
+    bad = np.zeros(nc, dtype=np.int64)
+    for c in prange(nc):
+        lo, hi = chunk(n, nc, c)
+        bad[c] = _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
+                                lo, hi)
+    return bad.sum()
+
+
+@njit(parallel=PRANGE, cache=True)
+def _step_3d(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted):
+    n = nodes.shape[0]
+    nc = particle_chunks(n)
+    if nc == 1:
         return _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
                         np.int64(0), n)
     bad = np.zeros(nc, dtype=np.int64)
     for c in prange(nc):
         lo, hi = chunk(n, nc, c)
-        if plane:
-            bad[c] = _elastic_plane(nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
-                                    lo, hi)
-        else:
-            bad[c] = _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
-                              lo, hi)
+        bad[c] = _elastic(D, nodes, dN, w, scale, lam, mu, F, V, sigma, work, inverted,
+                          lo, hi)
     return bad.sum()

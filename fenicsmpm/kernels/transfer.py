@@ -159,7 +159,7 @@ def _force(D, nodes, N, dN, mass, V, stress, g, active, lo, hi, out):
     s3 = np.empty(len(D))
     if len(D) == 3:
         for p in range(lo, hi):
-            if restrict:
+            if restrict and not row_active(nodes, active, 0, p):
                 restrict_row(D, nodes, N, dN, active, 0, p, s3)
             for a in range(row_length(nodes, p)):
                 i = nodes[p, a]
@@ -171,7 +171,7 @@ def _force(D, nodes, N, dN, mass, V, stress, g, active, lo, hi, out):
         return
     g0, g1 = g[0], g[1]
     for p in range(lo, hi):        # 2D: the in-plane stress in scalars (1.5x, the same sums)
-        if restrict:
+        if restrict and not row_active(nodes, active, 0, p):
             restrict_row(D, nodes, N, dN, active, 0, p, s3)
         s00, s01, s10, s11 = stress[p, 0, 0], stress[p, 0, 1], stress[p, 1, 0], stress[p, 1, 1]
         mp, vp = mass[p], V[p]
@@ -278,18 +278,21 @@ def _p2g_affine_chunks(nc, D, nodes, N, mass, v, C, x, node_x, m_out, mv_out, mb
 
 
 # ---------------------------------------------------------------------- per-particle passes
-@njit(cache=True, inline="always")
+@njit(cache=True)
+def row_active(nodes, active, f, p):
+    """Whether every node of particle p's row is active in column f."""
+    for a in range(row_length(nodes, p)):
+        if not active[nodes[p, a], f]:
+            return False
+    return True
+
+
+@njit(cache=True)
 def restrict_row(D, nodes, N, dN, active, f, p, s):
-    """Particle p's gradients restricted to the nodes active in column f (restrict_gradients);
-    s: scratch of length d. Returns at once when all its nodes are active."""
+    """Particle p's gradients restricted to the nodes active in column f (restrict_gradients;
+    callers skip the rows whose nodes are all active, row_active); s: scratch of length d."""
     d = len(D)
     m = row_length(nodes, p)
-    full = True
-    for a in range(m):
-        if not active[nodes[p, a], f]:
-            full = False
-    if full:
-        return
     for k in range(d):
         s[k] = 0.0
     for a in range(m):
@@ -309,7 +312,8 @@ def restrict_row(D, nodes, N, dN, active, f, p, s):
 def _restrict(D, nodes, N, dN, active, field, lo, hi):
     s = np.empty(len(D))
     for p in range(lo, hi):
-        restrict_row(D, nodes, N, dN, active, field[p], p, s)
+        if not row_active(nodes, active, field[p], p):
+            restrict_row(D, nodes, N, dN, active, field[p], p, s)
 
 
 @njit(parallel=PRANGE, cache=True)
