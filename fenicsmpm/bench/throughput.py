@@ -92,13 +92,16 @@ QUICK = [
 ]
 
 # targets from the issue (reported, not asserted) and peers for context
-TARGETS = {"explicit_particle_updates_per_s_serial": 5.0e6,
+# issue 16: the default configuration (shape "auto": cpGIMP on this grid) on 1 and 2 threads
+TARGETS = {"default_particle_updates_per_s_1_thread": 8.0e6,
+           "default_particle_updates_per_s_2_threads": 1.5e7,
            "implicit_assembly_over_ksp_max": 1.0}
 PEERS = {"CB-Geo MPM, 1 core (particle updates/s)": 0.50e6}
 
 STAGES = ("locate", "shape", "p2g", "solve", "g2p", "constitutive")
 THREADS = (1, 2)                 # thread counts of the thread rows
 THREAD_SHAPES = ("mpm", "cpgimp")
+DEFAULT_SHAPE = "cpgimp"         # what shape="auto" takes on this axis-aligned grid
 SUBSTAGES = ("assembly", "ksp")          # parts of "solve" (implicit)
 
 
@@ -369,9 +372,9 @@ def plot(doc, path, comm):
     per = {k: [1e9 * v / r["n_particles"] for v, r in zip(vals, runs)]
            for k, vals in stacks.items()}
     common.stacked_bars(axes[0, 1], labels, per, ylabel="time per particle update [ns]")
-    tgt = 1e9 / TARGETS["explicit_particle_updates_per_s_serial"]
+    tgt = 1e9 / TARGETS["default_particle_updates_per_s_1_thread"]
     axes[0, 1].axhline(tgt, color="k", ls="--", lw=0.8)
-    axes[0, 1].text(-0.45, tgt, "explicit target: 5 M upd/s (200 ns)", fontsize=7,
+    axes[0, 1].text(-0.45, tgt, f"issue 16, default on one core: {tgt:.0f} ns", fontsize=7,
                     ha="left", va="bottom")
     axes[0, 1].set_title("per particle (comparable across sizes)", fontsize=9)
     return common.save_figure(fig, path, comm, title=common.figure_title(doc, "throughput"))
@@ -395,12 +398,7 @@ def print_report(doc, comm):
     for r in doc["runs"]:
         m = r["metrics"]
         if r["config"]["integrator"] == "Explicit":
-            t = TARGETS["explicit_particle_updates_per_s_serial"]
-            nt = r["config"].get("threads", 1)
-            common.say(comm, f"  {r['name']} ({comm.size} rank(s) x {nt} thread(s)): "
-                       f"{m['particle_updates_per_s'] / 1e6:.2f} M updates/s"
-                       f" vs target {t / 1e6:.0f} M (one core): "
-                       f"{'met' if m['particle_updates_per_s'] >= t else 'NOT met'}")
+            continue                  # the standard family: judged in the thread rows below
         elif "assembly_over_ksp" in m and m["assembly_over_ksp"] is not None:
             common.say(comm, f"  {r['name']}: assembly/KSP = {m['assembly_over_ksp']:.3g} vs "
                        f"target <= 1: {'met' if m['assembly_over_ksp'] <= 1 else 'NOT met'}")
@@ -418,6 +416,14 @@ def print_report(doc, comm):
         common.print_table(th["runs"], cols, comm, title="one process on 1 and 2 numba threads "
                            "(NUMBA_NUM_THREADS; cpu/wall: CPU seconds per wall second; shape..."
                            "constitutive: fractions of the step)")
+        for r in th["runs"]:              # the default family against issue 16's targets
+            nt = r["config"].get("threads", 1)
+            key = f"default_particle_updates_per_s_{nt}_thread{'s' if nt > 1 else ''}"
+            if r["config"].get("shape_family") != DEFAULT_SHAPE or key not in TARGETS:
+                continue
+            u, t = r["metrics"]["particle_updates_per_s"], TARGETS[key]
+            common.say(comm, f"  {r['name']} (the default shape here): {u / 1e6:.2f} M "
+                       f"updates/s vs target {t / 1e6:.0f} M: {'met' if u >= t else 'NOT met'}")
     for k, v in PEERS.items():
         common.say(comm, f"  peer: {k} = {v / 1e6:.2f} M")
 
