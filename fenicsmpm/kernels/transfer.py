@@ -495,21 +495,11 @@ def _g2p_momentum(D, nodes, N, du, v_old, v_new, flip, x, v, u, mass, lo, hi, mv
     d = len(D)
     for p in range(lo, hi):
         g2p_particle(D, nodes, N, du, v_old, v_new, flip, x, v, u, p)
-        mp, v0, v1 = mass[p], v[p, 0], v[p, 1]
-        if d == 3:
-            v2 = v[p, 2]
-            for a in range(row_length(nodes, p)):
-                w = N[p, a] * mp
-                i = nodes[p, a]
-                mv_out[i, 0] += w * v0
-                mv_out[i, 1] += w * v1
-                mv_out[i, 2] += w * v2
-        else:
-            for a in range(row_length(nodes, p)):
-                w = N[p, a] * mp
-                i = nodes[p, a]
-                mv_out[i, 0] += w * v0
-                mv_out[i, 1] += w * v1
+        for a in range(row_length(nodes, p)):
+            w = N[p, a] * mass[p]
+            i = nodes[p, a]
+            for k in range(d):
+                mv_out[i, k] += w * v[p, k]
 
 
 def g2p_momentum(D, nodes, N, du, v_old, v_new, flip, x, v, u, mass, mv_out):
