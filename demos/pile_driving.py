@@ -1,8 +1,8 @@
 """Pile driving (seed 004 ch. 4): an elastic pile hammered into hypoplastic sand, axisymmetric.
 
-    python3 demos/pile_driving.py [--out DIR] [--quick] [--h H] [--blows N] [--gap G]
-                                  [--start ramp|geostatic] [--t-gravity T] [--period P]
-                                  [--shape FAMILY]
+    python3 demos/pile_driving.py [--out DIR] [--quick] [--h H] [--grade H_FAR] [--blows N]
+                                  [--gap G] [--start ramp|geostatic] [--t-gravity T]
+                                  [--period P] [--shape FAMILY]
     mpirun -n 2 python3 demos/pile_driving.py --quick
 
 Set-up (seed 004 §4.2): a soil body of radius 5 m and depth 10 m in the meridian plane (r, z)
@@ -119,17 +119,66 @@ G = 10.0
 MU = 0.2
 Q_BLOW, T_ON, T_PERIOD = 1.0e6, 0.1, 0.5   # hammer: 1000 kPa for 0.1 s every 0.5 s (Fig 4.2)
 P_MAX = 3.0e5                              # pressure of the soil's P-wave speed (time step)
+R_FINE, Z_FINE = 0.6, 3.0                  # graded mesh (--grade): cells of size h for r < R_FINE
+                                           # and z > H_SOIL - Z_FINE
+GRADE_RATIO = 1.2                          # growth of the cells outside that zone
 SOIL, PILE = 0, 1
 
 
+def graded_nodes(length, fine_lo, fine_hi, h, h_far, ratio=GRADE_RATIO):
+    """Grid lines on [0, length]: spacing h on [fine_lo, fine_hi] (a multiple of h from an end
+    of the interval that it touches), growing by `ratio` a cell outside it up to h_far, then
+    uniform; the coarse runs are stretched to end exactly at 0 and `length` (h_far > h)."""
+    if not h_far > h:
+        raise ValueError(f"graded_nodes: 'h_far' must be larger than h = {h:g}, got {h_far!r}")
+
+    def run(gap):                   # spacings away from the fine zone, covering `gap` metres
+        ds, s, d = [], 0.0, h
+        while gap - s > 1e-9 * length:
+            d = min(d * ratio, h_far)
+            ds.append(d)
+            s += d
+        if not ds:
+            return np.zeros(0)
+        ds = np.array(ds)
+        return ds * gap / ds.sum()
+    lo = 0.0 if fine_lo <= 0.0 else fine_lo
+    hi = length if fine_hi >= length else fine_hi
+    n_fine = int(round((hi - lo) / h))
+    if lo == 0.0:
+        hi = n_fine * h
+    else:
+        lo = hi - n_fine * h
+    below = run(lo)[::-1]
+    above = run(length - hi)
+    steps = np.concatenate([below, np.full(n_fine, h), above])
+    x = np.concatenate([[0.0], np.cumsum(steps)])
+    x[-1] = length
+    return x
+
+
 def build(h, start="ramp", t_gravity=2.0, per_cell=2, gap=None, normal="max-gradient",
-          shape="auto"):
+          shape="auto", h_far=None):
     """Mesh, particles and simulation; gravity ramped over t_gravity ("ramp", seed) or a K0
-    state with gravity on from t = 0 ("geostatic"); shape: Simulation(shape=...)."""
+    state with gravity on from t = 0 ("geostatic"); shape: Simulation(shape=...). h_far: a
+    graded mesh (graded_nodes), cells of size h for r < R_FINE and z > H_SOIL - Z_FINE (the
+    pile, the soil around it and below its tip), growing to h_far outside; None: uniform."""
     head = 1.0                                                      # headroom above the pile
-    nr, nz = int(round(R_SOIL / h)), int(round((H_SOIL + L_PILE + head) / h))
-    msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [nr * h, nz * h]], [nr, nz],
-                                 dmesh.CellType.quadrilateral)
+    top = H_SOIL + L_PILE + head
+    if h_far is None:
+        nr, nz = int(round(R_SOIL / h)), int(round(top / h))
+        rs, zs = np.arange(nr + 1) * h, np.arange(nz + 1) * h
+        msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [nr * h, nz * h]], [nr, nz],
+                                     dmesh.CellType.quadrilateral)
+    else:
+        rs = graded_nodes(R_SOIL, 0.0, R_FINE, h, h_far)
+        zs = graded_nodes(top, H_SOIL - Z_FINE, top, h, h_far)
+        nr, nz = len(rs) - 1, len(zs) - 1
+        msh = dmesh.create_rectangle(comm, [[0.0, 0.0], [float(nr), float(nz)]], [nr, nz],
+                                     dmesh.CellType.quadrilateral)
+        xg = msh.geometry.x                 # the unit lattice mapped onto the grid lines
+        xg[:, 0] = np.interp(xg[:, 0], np.arange(nr + 1), rs)
+        xg[:, 1] = np.interp(xg[:, 1], np.arange(nz + 1), zs)
     grid = fm.Grid(msh, axisymmetric=True)
     soil = fm.Hypoplastic(**TABLE_4_1, density=RHO_SOIL, e_0=E_0, p_max=P_MAX)
     pile = fm.LinearElastic(E=E_PILE, nu=NU_PILE, density=RHO_PILE)
@@ -151,8 +200,8 @@ def build(h, start="ramp", t_gravity=2.0, per_cell=2, gap=None, normal="max-grad
                         gravity_ramp=2 * t_gravity if start == "ramp" else None, shape=shape)
     tol = 1e-6 * h
     sim.fix(lambda x: np.abs(x[:, 1]) < tol)                            # bottom fixed
-    sim.fix(lambda x: np.abs(x[:, 0] - nr * h) < tol, [0])             # outer side on rollers
-    return sim, soil
+    sim.fix(lambda x: np.abs(x[:, 0] - rs[-1]) < tol, [0])             # outer side on rollers
+    return sim, soil, (rs, zs)
 
 
 def hammer(t0, period=T_PERIOD):
@@ -170,7 +219,12 @@ def main(argv=None):
                         help="h = 0.3 m, K0 start, 0.1 s settling, 2 blows every 0.25 s, gap "
                              "check 0 (test)")
     parser.add_argument("--h", type=float, default=None,
-                        help="cell size [m] (default 0.15; --quick 0.3)")
+                        help="cell size [m] (near the pile with --grade; default 0.15, "
+                             "--quick 0.3)")
+    parser.add_argument("--grade", type=float, default=None, metavar="H_FAR",
+                        help="graded mesh: cells of size h near the pile (r < %g m, z > %g m), "
+                             "growing by %g a cell to H_FAR outside (default: uniform h)"
+                             % (R_FINE, H_SOIL - Z_FINE, GRADE_RATIO))
     parser.add_argument("--per-cell", type=int, default=2, help="particles per cell and direction")
     parser.add_argument("--blows", type=int, default=None, help="hammer blows (default 2)")
     parser.add_argument("--start", choices=("ramp", "geostatic"), default=None,
@@ -189,13 +243,16 @@ def main(argv=None):
                              "family for hypoplastic sand; e.g. cpgimp)")
     args = parser.parse_args(argv)
     h = args.h or (0.3 if args.quick else 0.15)
+    if args.grade is not None and not args.grade > h:
+        parser.error(f"--grade (the far cell size) must be larger than --h = {h:g}, got {args.grade:g}")
     blows = args.blows if args.blows is not None else 2
     start = args.start or "geostatic"
     t_grav = args.t_gravity or (2.0 if start == "ramp" else (0.1 if args.quick else 0.2))
     period = args.period or (0.25 if args.quick else T_PERIOD)
     gap = args.gap if args.gap is not None else (0.0 if args.quick else -1.0)
-    sim, soil = build(h, start, t_grav, per_cell=args.per_cell, gap=None if gap < 0 else gap,
-                      normal=args.normal, shape=args.shape)
+    sim, soil, (rs, zs) = build(h, start, t_grav, per_cell=args.per_cell,
+                                gap=None if gap < 0 else gap, normal=args.normal,
+                                shape=args.shape, h_far=args.grade)
     p = sim.particles
     pile = p.material_id == PILE
     mass0 = gsum(comm, p.mass.sum())
@@ -228,10 +285,10 @@ def main(argv=None):
     # after gravity: pile settlement and the vertical stress at the base
     soil_p = p.material_id == SOIL
     settle_head, settle_tip = -uz("head"), -uz("tip")
-    base = soil_p & (p.x[:, 1] < 0.5 * h)
+    base = soil_p & (p.x[:, 1] < 0.5 * zs[1])              # the bottom cell row
     sv_base = gsum(comm, p.stress[base, 1, 1].sum()) / gsum(comm, base.sum())
     sv_exact = -RHO_SOIL * G * (H_SOIL - gsum(comm, p.x[base, 1].sum()) / gsum(comm, base.sum()))
-    far = soil_p & (p.x[:, 0] > R_SOIL - h) & (p.x[:, 1] > H_SOIL - 0.5 * h)
+    far = soil_p & (p.x[:, 0] > rs[-2]) & (p.x[:, 1] > H_SOIL - 0.5 * h)   # outer cell column
     settle_surface = -gsum(comm, p.u[far, 1].sum()) / max(gsum(comm, far.sum()), 1)
     # hammer blows (the pile head load follows the head particles)
     t_b = sim.t
@@ -270,7 +327,7 @@ def main(argv=None):
     near = (p.x[soil_p, 0] < 1.0) & (np.abs(p.x[soil_p, 1] - zt) < 1.0)
     finite = (np.all(np.isfinite(p.stress)) and np.all(np.isfinite(p.x))
               and np.all(np.isfinite(p.state[soil_p])))
-    res = dict(h=h, per_cell=args.per_cell, shape=sim.shape, gap=gap, start=start,
+    res = dict(h=h, h_far=args.grade, per_cell=args.per_cell, shape=sim.shape, gap=gap, start=start,
                t_gravity=t_grav, blows=blows,
                period=period, dt=sim.dt,
                steps=sim.step_count, wall_s=wall, n_particles=p.n_global(),
