@@ -15,9 +15,9 @@ import fenicsmpm as fm
 from fenicsmpm.problems import localisation
 
 
-def _footing(line_search, rtol=1e-8):
+def _footing(line_search, rtol=1e-8, E=10e6):
     return localisation.strip_footing(
-        0.1, material=fm.VonMises(E=10e6, nu=0.49, density=1800.0, c_u=1e4), settlement=0.03,
+        0.1, material=fm.VonMises(E=E, nu=0.49, density=1800.0, c_u=1e4), settlement=0.03,
         steps=30, width=5.0, depth=3.0, half_width=0.5, cuts=0, line_search=line_search,
         rtol=rtol)
 
@@ -45,7 +45,10 @@ def test_auto_line_search_is_the_default_and_rescues_the_footing():
     stalled the auto run's retry at step 26 at |R|/|f| = 6.3e-7, where other runs of the same
     code passed (the two ranks' direct solver adds in no fixed order); at 1e-6 the serial
     retry fails at step 26 (2.2e-2), at 2e-6 the converged steps of two runs differ by more
-    than the comparison's 1e-6. At 3e-7: 9 of 9 runs on 2 ranks and the serial run pass."""
+    than the comparison's 1e-6. At 3e-7: 9 of 9 runs on 2 ranks and the serial run pass.
+    With E scaled by 1 + 1e-9 k (round-off-sized changes of the path), the full step fails on
+    every run and "auto" completed 85 of 90 (k = 0..89, serially) before its retry had the
+    trust radius (AUTO_TRUST), 119 of 120 (serially) and 40 of 40 (2 ranks) with it."""
     assert fm.QuasiStatic().line_search == "auto" and fm.Newmark().line_search == "auto"
     auto = _footing("auto", 3e-7)
     assert auto["completed"], auto["stopped"]
@@ -56,6 +59,22 @@ def test_auto_line_search_is_the_default_and_rescues_the_footing():
     # the same steps, to Newton's tolerance (two MPI runs differ by up to 1e-9: the parallel
     # direct solver does not add in a fixed order)
     assert n >= 20 and np.allclose(auto["pressure"][:n], full["pressure"], rtol=1e-6, atol=0), (n, q)
+
+
+@pytest.mark.heavy
+def test_auto_retry_limits_the_correction():
+    """The retry of line_search="auto" starts each backtracking at a correction of at most
+    AUTO_TRUST = 0.05 h on any node. The same footing with E scaled by 1 + 1.5e-8 (one of the 120
+    round-off-sized perturbations measured, fenicsmpm.integrators.implicit.AUTO_TRUST): the
+    full step fails at step 27 (serially), the retry without the radius stalled there at
+    |R|/|f| = 1.3e-1 (a Newton correction of 6.4 h, of which alpha = 1/64 was taken); with it
+    the footing runs to the end with the Prandtl plateau."""
+    from fenicsmpm.integrators import implicit
+    assert implicit.AUTO_TRUST == 0.05
+    auto = _footing("auto", 3e-7, E=10e6 * (1.0 + 1.5e-8))
+    assert auto["completed"], auto["stopped"]
+    q = auto["pressure"] / ((2.0 + np.pi) * 1e4)
+    assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
 
 
 @pytest.mark.parametrize("bad", [-1, 31, 2.5, True, "yes"])

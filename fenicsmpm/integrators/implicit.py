@@ -23,8 +23,10 @@ correction that raises |R| or makes it non-finite is halved up to k times (backt
 the full Newton step), or
 "auto" (the default): the full Newton step, and if Newton fails on a step (diverges, reaches
 max_iter or a non-finite residual) the same step once more from du = 0 with
-line_search = AUTO_LINE_SEARCH (6) before the step is given up (a dt cut, max_dt_cuts). Steps that
-converge with the full step are therefore unchanged. Measured (`tests/test_line_search.py`): the
+line_search = AUTO_LINE_SEARCH (6), its trial corrections no longer than AUTO_TRUST = 0.05 cell
+sizes on any node (a trust radius: the retry starts each backtracking at
+alpha = min(1, 0.05 h / max|delta|)), before the step is given up (a dt cut, max_dt_cuts). Steps
+that converge with the full step are therefore unchanged. Measured (`tests/test_line_search.py`): the
 Prandtl footing of a smooth rigid strip on von Mises soil (h = 0.1 m, 1 mm steps, no step cuts)
 diverges at step 27 with the full step and runs to the end with line_search=6 and with "auto";
 in the softening shear layer of test_regularisation line_search=6 on every step raises the
@@ -42,12 +44,20 @@ from ..kernels import axisymmetric as axi
 from ..boundaries import particle_layer as kl
 from ..boundaries import particle_motion as pm
 from ..boundaries.dirichlet import prescribed_rates
+from ..collective import gmax_of
 from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
 from .linear_system import DEFAULT_PREFIX, LinearSystem, OutsidePattern, stencil_rings
 
 MAX_RINGS = 4           # the widest implicit pattern _Newton._plan grows to (cell rings)
 AUTO_LINE_SEARCH = 6    # line_search="auto": the backtracking depth of the retry of a failed step
+# line_search="auto": the retry's longest trial correction on any node, in cell sizes. Measured
+# (the footing of tests/test_line_search.py with E scaled by 1 + 1e-9 k, k = 0..119, serially):
+# the full step fails on every run; without the radius the retry then failed on 5 of the 90
+# runs k = 0..89 (Newton corrections of 6-20 h at a step that moves the soil 0.02 h, of which
+# the last backtracking, alpha = 1/64, still took 0.1-0.3 h); with 0.25 h on 3 of 60, with
+# 0.05 h on 1 of 120.
+AUTO_TRUST = 0.05
 log = logging.getLogger("fenicsmpm.newton")
 
 
@@ -262,10 +272,10 @@ class _Newton:
                                          f"residual in Newton iteration {it}")
             return R, rnorm, fint, reaction, sig
 
-        def newton(du, depth):
+        def newton(du, depth, trust=np.inf):
             """Newton from du (changed in place), halving a correction that raises |R| up to
-            `depth` times: (du, iterations, |R|, |f|, reaction); _NotConverged if it diverges
-            or reaches max_iter."""
+            `depth` times, starting from alpha = min(1, trust h / max|delta|): (du, iterations,
+            |R|, |f|, reaction); _NotConverged if it diverges or reaches max_iter."""
             it = 0
             t1 = time.perf_counter()
             R, rnorm, fint, reaction, sig = newton_residual(du, it)
@@ -331,6 +341,9 @@ class _Newton:
                 # depth > 0: halve the correction (up to depth times) while it raises |R| or
                 # makes it non-finite (module docstring); 0: the full Newton step
                 alpha, prev = 1.0, rnorm
+                if depth > 0 and np.isfinite(trust):
+                    longest = gmax_of(sim.comm, np.abs(delta[: sim.grid.n_owned_nodes]))
+                    alpha = min(1.0, trust * sim.grid.h / max(longest, 1e-300))
                 for k in range(depth + 1):
                     try:
                         R, rnorm, fint, reaction, sig = newton_residual(du + alpha * delta, it + 1)
@@ -357,9 +370,10 @@ class _Newton:
             self.retries += 1
             first = getattr(err, "iterations", 0)
             if sim.comm.rank == 0:
-                log.info("%s; retrying the step with line_search=%d", err, AUTO_LINE_SEARCH)
+                log.info("%s; retrying the step with line_search=%d, corrections of at most %g h",
+                         err, AUTO_LINE_SEARCH, AUTO_TRUST)
             try:
-                du, it, rnorm, scale, reaction = newton(du, AUTO_LINE_SEARCH)
+                du, it, rnorm, scale, reaction = newton(du, AUTO_LINE_SEARCH, AUTO_TRUST)
             except _NotConverged as again:
                 raise _NotConverged(f"{again} (full step: {err}; then line_search="
                                     f"{AUTO_LINE_SEARCH})") from None
