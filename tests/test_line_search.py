@@ -28,13 +28,20 @@ def test_line_search_rescues_the_footing():
     `mpirun -n 2` stopped the line_search=6 run at step 27 with the default 1e-8, which the
     two ranks' direct-solver round-off (1e-9 between runs) puts within reach; measured
     2026-12-05 on 2 ranks, rtol 1e-6: the full step fails at step 26, line_search=6 completes
-    with the same plateau to 2e-9 (1.0324)."""
+    with the same plateau to 2e-9 (1.0324).
+    The two ranks' round-off changes the path from run to run (measured 2026-12-07: the last
+    pressure of four runs of the same code 51055.383 / .416 / .387 / .389 Pa, the full step
+    failing at step 26 in three and 27 in one), and line_search=6 does not complete every
+    path: with E scaled by 1 + 1e-9 k it completed 38 of 40 (k = 0..39, serially; k = 5 and 29
+    stopped at steps 26 and 27). So the test runs k = 0, 1, 2 and asks for 2 of 3."""
     full = _footing(0, 3e-7)
     assert not full["completed"] and "Newton did not converge" in full["stopped"], full["stopped"]
-    ls = _footing(6, 1e-6)
-    assert ls["completed"], ls["stopped"]
-    q = ls["pressure"] / ((2.0 + np.pi) * 1e4)
-    assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
+    runs = [_footing(6, 1e-6, E=10e6 * (1.0 + 1e-9 * k)) for k in range(3)]
+    done = [ls for ls in runs if ls["completed"]]
+    assert len(done) >= 2, [ls["stopped"] for ls in runs]
+    for ls in done:
+        q = ls["pressure"] / ((2.0 + np.pi) * 1e4)
+        assert abs(np.mean(q[len(q) * 2 // 3:]) - 1.0) < 0.05, q
 
 
 @pytest.mark.heavy
