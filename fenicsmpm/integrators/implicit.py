@@ -25,8 +25,9 @@ the full Newton step), or
 max_iter or a non-finite residual) the same step once more from du = 0 with
 line_search = AUTO_LINE_SEARCH (6), its trial corrections no longer than AUTO_TRUST = 0.05 cell
 sizes on any node (a trust radius: the retry starts each backtracking at
-alpha = min(1, 0.05 h / max|delta|)), before the step is given up (a dt cut, max_dt_cuts). Steps
-that converge with the full step are therefore unchanged. Measured (`tests/test_line_search.py`): the
+alpha = min(1, 0.05 h / max|delta|), so it moves no node more than max_iter x 0.05 h), before the
+step is given up (a dt cut, max_dt_cuts). Steps that converge with the full step are therefore
+unchanged. Measured (`tests/test_line_search.py`): the
 Prandtl footing of a smooth rigid strip on von Mises soil (h = 0.1 m, 1 mm steps, no step cuts)
 diverges at step 27 with the full step and runs to the end with line_search=6 and with "auto";
 in the softening shear layer of test_regularisation line_search=6 on every step raises the
