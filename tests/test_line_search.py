@@ -7,7 +7,13 @@ on), a smooth rigid
 strip B/2 = 0.5 m on a 5 m x 3 m weightless layer, h = 0.1 m, pushed 30 mm in 30 quasi-static
 steps without step cuts. Measured: the full Newton step diverges at the 27th step
 (t = 0.867); with line_search=6 every step converges and the pressure over the last third of
-the push is 1.03 (2 + pi) c_u (Prandtl; 5 cells under B/2)."""
+the push is 1.03 (2 + pi) c_u (Prandtl; 5 cells under B/2).
+
+The round-off-sized variants quoted below (E x (1 + 1e-9 k)) are counted by
+
+    python3 tests/test_line_search.py LINE_SEARCH RTOL K0 K1     (e.g. auto 3e-7 0 120)
+
+(also under mpirun -n 2), which prints each variant that stops and the count."""
 import numpy as np
 import pytest
 
@@ -125,3 +131,22 @@ def test_backtracking_steps_back_from_a_non_finite_residual():
     sim, qs, M, eps = _oedometer(0, {1})
     with pytest.raises(FloatingPointError, match="non-finite residual in Newton iteration 1"):
         sim.run(t_end=1.0, progress=False)
+
+
+def _count_variants(line_search, rtol, ks):
+    """The variants E x (1 + 1e-9 k), k in ks, of the footing that stop: printed, with the count."""
+    from mpi4py import MPI
+    stopped = 0
+    for k in ks:
+        r = _footing(line_search, rtol, E=10e6 * (1.0 + 1e-9 * k))
+        stopped += not r["completed"]
+        if not r["completed"] and MPI.COMM_WORLD.rank == 0:
+            print(f"k = {k}: {r['stopped'][:200]}", flush=True)
+    if MPI.COMM_WORLD.rank == 0:
+        print(f"line_search={line_search!r}, rtol {rtol:g}: {stopped} of {len(ks)} stopped")
+
+
+if __name__ == "__main__":
+    import sys
+    ls, rtol, k0, k1 = sys.argv[1:5]
+    _count_variants(ls if ls == "auto" else int(ls), float(rtol), range(int(k0), int(k1)))

@@ -273,9 +273,9 @@ class _Newton:
                                          f"residual in Newton iteration {it}")
             return R, rnorm, fint, reaction, sig
 
-        def newton(du, depth, trust=np.inf):
+        def newton(du, depth, trust=None):
             """Newton from du (changed in place), halving a correction that raises |R| up to
-            `depth` times, starting from alpha = min(1, trust h / max|delta|): (du, iterations,
+            `depth` times, from alpha = min(1, trust h / max|delta|) if trust: (du, iterations,
             |R|, |f|, reaction); _NotConverged if it diverges or reaches max_iter."""
             it = 0
             t1 = time.perf_counter()
@@ -342,7 +342,7 @@ class _Newton:
                 # depth > 0: halve the correction (up to depth times) while it raises |R| or
                 # makes it non-finite (module docstring); 0: the full Newton step
                 alpha, prev = 1.0, rnorm
-                if depth > 0 and np.isfinite(trust):
+                if trust is not None:
                     longest = gmax_of(sim.comm, np.abs(delta[: sim.grid.n_owned_nodes]))
                     alpha = min(1.0, trust * sim.grid.h / max(longest, 1e-300))
                 for k in range(depth + 1):
@@ -377,7 +377,8 @@ class _Newton:
                 du, it, rnorm, scale, reaction = newton(du, AUTO_LINE_SEARCH, AUTO_TRUST)
             except _NotConverged as again:
                 raise _NotConverged(f"{again} (full step: {err}; then line_search="
-                                    f"{AUTO_LINE_SEARCH})") from None
+                                    f"{AUTO_LINE_SEARCH}, corrections of at most "
+                                    f"{AUTO_TRUST:g} h)") from None
             it += first
         self.iterations.append(it)
         sim.nodal["reaction"] = reaction        # force the fixed dofs exert (summed over ranks)
