@@ -3,6 +3,7 @@
     python3 demos/pile_driving.py [--out DIR] [--quick] [--h H] [--grade H_FAR] [--blows N]
                                   [--gap G] [--start ramp|geostatic] [--t-gravity T]
                                   [--period P] [--shape FAMILY]
+                                  [--contact multi-velocity|penalty]
     mpirun -n 2 python3 demos/pile_driving.py --quick
 
 Set-up (seed 004 §4.2): a soil body of radius 5 m and depth 10 m in the meridian plane (r, z)
@@ -14,9 +15,13 @@ chi 1, p_t 1.6 kPa), rho 2600 kg/m^3, e_0 = 0.65; an elastic pile 5 m long, radi
 with a hemispherical (rounded) tip standing on the surface (E 100 MPa, nu 0.28, rho 2500);
 g = 10; pile-soil Coulomb friction mu = 0.2 by multi-velocity contact (fm.ExplicitContact,
 seed eqs 2.34-2.39; default: the plain detection of the seed, gap=None; --gap 0 the library's
-gap check). The seed's penalty algorithm (eqs 2.40-2.53, fm.ExplicitContact(algorithm=
-"penalty"), now also on axisymmetric grids) is not used here: its polylines would have to
-follow the soil surface around the tip. Bottom fixed, outer side r = 5 m on
+gap check), or with --contact penalty the seed's node-to-segment penalty contact (eqs
+2.40-2.53, fm.ExplicitContact(algorithm="penalty"); contact.penalty) between two polylines:
+the pile's outline (pile_outline: round the tip, up the shaft, across the head) and the
+sand's surface, both on the faces of their particle domains, vertices a particle spacing
+apart, k_n = M / h with M the larger constrained modulus (penalty_stiffness: the sand's at
+p_max); the surface line follows the sand as the tip pushes it down, so the shaft meets
+the stretched segment next to it. Bottom fixed, outer side r = 5 m on
 rollers, the axis fixed radially by the grid. Stage 1: gravity ramped over 2 s (seed 002 eq
 4.13, Simulation(gravity_ramp=4): g reaches its value at T/2), or with --start geostatic the
 K0 state (1 - sin phi_c) and e_0 (fenicsmpm.materials.hypoplastic.geostatic) with gravity on
@@ -120,6 +125,7 @@ from dolfinx import mesh as dmesh
 
 import fenicsmpm as fm
 from fenicsmpm.collective import gmax, gmax_of, gmin_of, gsum
+from fenicsmpm.contact.penalty import line
 from fenicsmpm.io import particle_raster, raster_shape
 from fenicsmpm.materials.hypoplastic import geostatic
 
@@ -172,8 +178,28 @@ def graded_nodes(length, fine_lo, fine_hi, h, h_far, ratio=GRADE_RATIO):
     return x
 
 
+def pile_outline(spacing):
+    """The pile's boundary polyline for penalty contact, the pile on its left (counter-
+    clockwise in (r, z)): from the tip on the axis round the hemispherical tip, up the shaft,
+    across the head back to the axis; vertices about `spacing` apart."""
+    z_c, top = H_SOIL + R_PILE, H_SOIL + L_PILE
+    n_arc = max(4, int(math.ceil(0.5 * math.pi * R_PILE / spacing)))
+    a = np.linspace(0.0, 0.5 * math.pi, n_arc + 1)
+    arc = np.column_stack([R_PILE * np.sin(a), z_c - R_PILE * np.cos(a)])
+    shaft = line((R_PILE, z_c), (R_PILE, top), max(1, int(math.ceil((top - z_c) / spacing))))
+    head = line((R_PILE, top), (0.0, top), max(1, int(math.ceil(R_PILE / spacing))))
+    return np.concatenate([arc, shaft[1:], head[1:]])
+
+
+def penalty_stiffness(soil, pile, h):
+    """k_n = M / h (force per unit area per unit penetration), M the larger constrained
+    modulus of the two bodies: the sand's at p_max (the bound dt="auto" uses) and the pile's
+    (contact.penalty, "Stability": the springs then keep the elastic wave step)."""
+    return max(soil.constrained_modulus(P_MAX), pile.constrained_modulus) / h
+
+
 def build(h, start="ramp", t_gravity=2.0, per_cell=2, gap=None, normal="max-gradient",
-          shape="auto", h_far=None):
+          shape="auto", h_far=None, contact="multi-velocity"):
     """Mesh, particles and simulation; gravity ramped over t_gravity ("ramp", seed) or a K0
     state with gravity on from t = 0 ("geostatic"); shape: Simulation(shape=...). h_far: a
     graded mesh (graded_nodes), cells of size h for r < R_FINE and z > H_SOIL - Z_FINE (the
@@ -209,7 +235,20 @@ def build(h, start="ramp", t_gravity=2.0, per_cell=2, gap=None, normal="max-grad
     if start == "geostatic":                   # K0 = 1 - sin phi_c, e = e_0; the pile unstressed
         geostatic(p, soil, G, surface=lambda x: np.full(len(x), H_SOIL))
         p.stress[p.material_id == PILE] = 0.0
-    integ = fm.ExplicitContact(scheme="MUSL", mu=MU, gap=gap, normal=normal)
+    if contact == "penalty":            # seed eqs 2.40-2.53: the pile's outline and the sand's surface
+        integ = fm.ExplicitContact(scheme="MUSL", mu=MU, algorithm="penalty",
+                                   penalty=dict(k_n=penalty_stiffness(soil, pile, h)))
+        # both lines on the particle domains' faces: the sand's top particle row and the
+        # pile's lowest particle (on a grid whose lines miss z = H_SOIL both lie off it, alike)
+        spacing = h / per_cell
+        soil_top = gmax_of(comm, p.x[p.material_id == SOIL, 1]) + 0.5 * spacing
+        pile_bottom = gmin_of(comm, p.x[p.material_id == PILE, 1]) - 0.5 * spacing
+        integ.add_polyline(PILE, pile_outline(spacing) + [0.0, pile_bottom - H_SOIL])
+        r_out = float(rs[-1])                     # the grid's outer side (R_SOIL to a cell)
+        integ.add_polyline(SOIL, line((r_out, soil_top), (0.0, soil_top),
+                                      int(math.ceil(r_out / spacing))))
+    else:
+        integ = fm.ExplicitContact(scheme="MUSL", mu=MU, gap=gap, normal=normal)
     # gravity_ramp T: g grows over T/2 (seed 002 eq 4.13), so T = 2 t_gravity
     sim = fm.Simulation(grid, p, integ, dt="auto", cfl=0.5, gravity=(0.0, -G),
                         gravity_ramp=2 * t_gravity if start == "ramp" else None, shape=shape)
@@ -251,6 +290,10 @@ def main(argv=None):
     parser.add_argument("--gap", type=float, default=None,
                         help="gap check of fm.ExplicitContact in cells; < 0: none, the plain "
                              "detection of seed eqs 2.34-2.39 (default; --quick: 0)")
+    parser.add_argument("--contact", choices=("multi-velocity", "penalty"), default="multi-velocity",
+                        help="pile-soil contact: multi-velocity (seed eqs 2.34-2.39, default) or "
+                             "penalty node-to-segment (eqs 2.40-2.53) between the pile's outline "
+                             "and the sand's surface")
     parser.add_argument("--normal", choices=("max-gradient", "average"), default="max-gradient",
                         help="contact normal of fm.ExplicitContact")
     parser.add_argument("--shape", default="auto",
@@ -267,7 +310,7 @@ def main(argv=None):
     gap = args.gap if args.gap is not None else (0.0 if args.quick else -1.0)
     sim, soil, (rs, zs) = build(h, start, t_grav, per_cell=args.per_cell,
                                 gap=None if gap < 0 else gap, normal=args.normal,
-                                shape=args.shape, h_far=args.grade)
+                                shape=args.shape, h_far=args.grade, contact=args.contact)
     p = sim.particles
     pile = p.material_id == PILE
     mass0 = gsum(comm, p.mass.sum())
@@ -342,7 +385,8 @@ def main(argv=None):
     near = (p.x[soil_p, 0] < 1.0) & (np.abs(p.x[soil_p, 1] - zt) < 1.0)
     finite = (np.all(np.isfinite(p.stress)) and np.all(np.isfinite(p.x))
               and np.all(np.isfinite(p.state[soil_p])))
-    res = dict(h=h, h_far=args.grade, per_cell=args.per_cell, shape=sim.shape, gap=gap, start=start,
+    res = dict(h=h, h_far=args.grade, per_cell=args.per_cell, shape=sim.shape, contact=args.contact,
+               gap=gap if args.contact == "multi-velocity" else None, start=start,
                t_gravity=t_grav, blows=blows,
                period=period, dt=sim.dt,
                steps=sim.step_count, wall_s=wall, n_particles=p.n_global(),
@@ -361,6 +405,10 @@ def main(argv=None):
                mass_change=gsum(comm, p.mass.sum()) / mass0 - 1.0,
                finite=bool(comm.allreduce(bool(finite), op=MPI.LAND)),
                projections=int(gsum(comm, soil.stats[1])),
+               # penalty: polyline vertices with no mass of their body around them (W_v = 0 in
+               # contact.penalty: they stop moving and drop out of the detection)
+               penalty_idle_vertices=(sim.integrator.penalty_stats["idle_vertices"]
+                                      if args.contact == "penalty" else None),
                history=ht.tolist())
     # the void ratio near the pile for the plot: rasters of squares of 1.5 particle spacings
     # (the soil's mean e, the pile's cells in black)
@@ -372,6 +420,7 @@ def main(argv=None):
     if comm.rank != 0:
         return res
     print(f"pile driving (h = {h:g} m, {res['n_particles']} particles, shape {sim.shape}, "
+          f"{args.contact} contact, "
           f"{start} start, {sim.step_count} steps of {sim.dt:.3g} s, {wall:.0f} s wall)")
     print(f"{'quantity':44s} {'here':>12s} {'seed 004':>12s}")
     print(f"{'pile-head settlement after gravity [m]':44s} {settle_head:12.3f} {'0.25':>12s}")

@@ -95,7 +95,8 @@ by default) between the bodies' polylines are mapped to each body's nodes as ext
 forces before the trial velocities, and the nodal projection above is not applied.
 Rigid bodies' polylines move with their prescribed velocity. The per-body contact force is
 again `body_contact_force`, and `penalty_stats` holds the step's number of pairs, slipping
-pairs and largest penetration.
+pairs and largest penetration, and the number of idle vertices (W_v = 0: no mass of their
+body around them, so they neither move nor take part).
 
 Paired interface (interface="paired", multi-velocity with a rigid body and the gap check, on
 axis-aligned lattices; the default interface="auto" takes it against every rigid body whose

@@ -91,7 +91,10 @@ above it is warned about (RuntimeWarning).
 
 Axisymmetric grids (x = (r, z)): nodal forces are per radian, so each vertex stands for the
 ring of area l_s r_s per radian: l_s is replaced by l_s r_s in every force above (normal,
-tangential, dashpot, preload); a vertex on the axis carries none.
+tangential, dashpot, preload); a vertex on the axis carries none, and no vertex crosses it
+(r = max(r, 0) after every move: one that drifted to r = -7e-9 left the grid, lost its weight
+and froze, and its segment dropped out of the detection; demos/pile_driving.py --contact
+penalty).
 
 Checkpoints keep the polyline state (positions, last displacements, tangential forces:
 ExplicitContact.checkpoint_state). Not yet: 3D (surfaces)."""
@@ -367,7 +370,7 @@ class PenaltyContact:
         self.sbody = np.ascontiguousarray(self.vbody[self.seg[:, 0]])
         self.du = np.zeros_like(self.x)
         self.ft = np.zeros(len(self.x))
-        self.stats = dict(pairs=0, max_penetration=0.0, slipping=0)
+        self.stats = dict(pairs=0, max_penetration=0.0, slipping=0, idle_vertices=0)
         self._warned_dt = False
         self._preloaded = False
 
@@ -470,6 +473,7 @@ class PenaltyContact:
             if not rigid[a]:
                 shift[s] -= (pn / self.k_n + g) * (1.0 if rigid[b] else 0.5) * en
         self.x += shift
+        self._keep_on_grid(sim)
         self.ft = ft0
 
     def forces(self, sim, present, m_b, rigid, mu, dt):
@@ -520,7 +524,8 @@ class PenaltyContact:
         if comm.size > 1:
             from mpi4py import MPI
             pen = comm.allreduce(pen, op=MPI.MAX)
-        self.stats = dict(pairs=int(buf[-3]), max_penetration=pen, slipping=int(buf[-1]))
+        self.stats = dict(pairs=int(buf[-3]), max_penetration=pen, slipping=int(buf[-1]),
+                          idle_vertices=int(np.count_nonzero(W <= 0.0)))
         nb = m_b.shape[1]
         self.body_force = np.stack([np.bincount(self.vbody, F[:, k], minlength=nb)
                                     for k in range(2)], axis=1)
@@ -539,3 +544,11 @@ class PenaltyContact:
         v[r] = v_rigid[self.vbody[r]]
         self.du = dt * v
         self.x += self.du
+        self._keep_on_grid(sim)
+
+    def _keep_on_grid(self, sim):
+        """On an axisymmetric grid no vertex crosses the axis: r = max(r, 0) (a vertex on the
+        axis moves with a radial velocity of round-off size, and at r < 0 it would leave the
+        grid, lose its weight W_v and stop moving)."""
+        if sim.grid.axisymmetric:
+            np.maximum(self.x[:, 0], 0.0, out=self.x[:, 0])
