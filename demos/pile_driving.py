@@ -105,6 +105,22 @@ pile's own weight (a pile of 8.8 kN on its rounded tip, on sand at zero stress: 
 failure under the tip) does not; the second blow (`--blows 2`) drives the pile 0.313 / 0.488
 m at h = 0.15 / 0.075 m (the void ratio near the tip then down to 0.546 / 0.472; 828 s wall
 at 0.075 m). Still NOT converged in the issue's sense.
+Penalty contact (--contact penalty, 2026-12-07 night, serial, 2 blows; `--h H [--grade 0.3]`):
+                                   --quick (h 0.3)  h = 0.15 uniform  0.15 graded   0.075 graded
+    particles / wall               2,311 / 9 s      8,911 / 142 s     3,733 / 93 s  7,497 / 421 s
+    head settlement after settling 0.027 m          0.031 m           0.032 m       0.060 m
+    penetration, blow 1 / blow 2   -0.064 / 0.153   0.384 / 0.127     0.385 / 0.127 0.715 / 0.806
+    peak resistance, blow 1        140.4 kN         274.4 kN          272.9 kN      114.5 kN
+(--quick: the pile rebounds off the blow and is still in flight at the end of its 0.25 s
+period.) At h = 0.15 m the blows drive the pile 0.38 and 0.13 m (seed ~0.11 m a blow), but at
+0.075 m the sand's surface line does not stay on the sand: its vertices move with the sand's
+grid velocity, the vertex on the axis runs ahead of the tip (18 cm below it 0.2 s into the
+first blow; the vertices next to it slide round the rounded tip to the shaft), and the tip
+then bears on one long stretched segment, so the pile keeps sinking between the blows (blow
+2 deeper than blow 1). Not converged either; a surface that follows the particles (re-built
+from them, or CPDI corners as the seed's) would be the next step. The run at 0.15 m first
+fell through the sand (2.1 m in the first blow): the surface vertex on the axis had been
+moved to r = -7e-9 by the preload and left the grid (mended in contact.penalty).
 The gap check lets a body one cell wide creep into the soil (an elastic rod on a block sinks
 0.08 m in 0.2 s, tests/test_contact.py), so the default is the seed's plain detection, which
 contacts one cell early and over-resists (as the seed says of its frictional MPM contact).
