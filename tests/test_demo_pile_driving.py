@@ -110,3 +110,22 @@ def test_pile_driving_demo_penalty(shared_module_tmp_path):
     assert all(b["total"] > 10e3 for b in r["resistance_peak"]), r["resistance_peak"]
     assert r["penalty_idle_vertices"] == 0 and r["n_below_e_d"] == 0, r
     assert exist_on_rank0(os.path.join(out, "pile_driving.json"), os.path.join(out, "pile_driving.png"))
+
+
+def test_surface_settlement_follows_the_particles_that_started_on_top():
+    """The far-field surface settlement is the mean -u_z of the particles that started in the
+    sand's top row beyond r_min, however far they settled: before, the row was chosen by the
+    particles' current height (z > H - h/2), so after the seed's 2 s gravity ramp at h = 0.15 m
+    (0.07 m of settlement, top row at 9.9375 m) the demo reported 0.000 m."""
+    demo = load_demo("pile_driving")
+    h = 0.15
+    z0 = np.array([9.9375, 9.8625, 9.9375, 9.9375])      # top row, the row below, top, top
+    r0 = np.array([4.9, 4.9, 4.9, 1.0])                   # the last one inside r_min
+    u = np.zeros((4, 2))
+    u[:, 1] = -0.07
+    x = np.column_stack([r0, z0]) + u
+    soil = np.array([True, True, True, True])
+    if demo.comm.rank != 0:                               # the particles live on rank 0
+        x, u, soil = x[:0], u[:0], soil[:0]
+    s = demo.surface_settlement(x, u, soil, 4.8, h)
+    assert abs(s - 0.07) < 1e-12, s
