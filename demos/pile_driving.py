@@ -228,7 +228,11 @@ def build(h, start="ramp", t_gravity=2.0, per_cell=2, gap=None, normal="max-grad
     """Mesh, particles and simulation; gravity ramped over t_gravity ("ramp", seed) or a K0
     state with gravity on from t = 0 ("geostatic"); shape: Simulation(shape=...). h_far: a
     graded mesh (graded_nodes), cells of size h for r < R_FINE and z > H_SOIL - Z_FINE (the
-    pile, the soil around it and below its tip), growing to h_far outside; None: uniform."""
+    pile, the soil around it and below its tip), growing to h_far outside; None: uniform.
+    contact: "multi-velocity" (with gap and normal) or "penalty" (pile_outline against the
+    sand's surface line, k_n = penalty_stiffness)."""
+    if contact not in ("multi-velocity", "penalty"):
+        raise ValueError(f"build: 'contact' must be 'multi-velocity' or 'penalty', got {contact!r}")
     head = 1.0                                                      # headroom above the pile
     top = H_SOIL + L_PILE + head
     if h_far is None:

@@ -65,6 +65,12 @@ def test_graded_nodes(fine):
         demo.graded_nodes(length, *fine, h, h)
 
 
+def test_build_refuses_an_unknown_contact():
+    demo = load_demo("pile_driving")
+    with pytest.raises(ValueError, match="'contact' must be"):
+        demo.build(0.6, "geostatic", 0.1, contact="mortar")
+
+
 @pytest.mark.heavy
 def test_pile_driving_demo_graded(shared_module_tmp_path):
     out = os.path.join(shared_module_tmp_path, "pile_driving_graded")
