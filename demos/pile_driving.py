@@ -114,11 +114,17 @@ Penalty contact (--contact penalty, 2026-12-07 night, serial, 2 blows; `--h H [-
 (--quick: the pile rebounds off the blow and is still in flight at the end of its 0.25 s
 period.) At h = 0.15 m the blows drive the pile 0.38 and 0.13 m (seed ~0.11 m a blow), but at
 0.075 m the sand's surface line does not stay on the sand: its vertices move with the sand's
-grid velocity, the vertex on the axis runs ahead of the tip (18 cm below it 0.2 s into the
-first blow; the vertices next to it slide round the rounded tip to the shaft), and the tip
-then bears on one long stretched segment, so the pile keeps sinking between the blows (blow
-2 deeper than blow 1). Not converged either; a surface that follows the particles (re-built
-from them, or CPDI corners as the seed's) would be the next step. The run at 0.15 m first
+grid velocity, and 0.2 s into the first blow the vertex on the axis is 18 cm below the
+pile's tip vertex and 6 cm below the sand's particles there, the vertices next to it have
+slid round the rounded tip to the shaft, and the sand at the axis has opened a gap under
+the tip (its top particle 9 cm below the pile's lowest one; 2.5-3 cm, adjacent particles,
+with multi-velocity contact at the same time, where the pile sank as fast). The pile then
+rests on the rim of its tip and on its shaft and keeps sinking between the blows (0.07 m
+from t = 0.43 to 0.69 s under a 10-30 kN contact force), blow 2 deeper than blow 1 (0.488 m
+with multi-velocity). Not converged either; a surface that follows the particles (re-built
+from them, or CPDI corners as the seed's) would be the next step. (Diagnostic runs of
+`build(0.075, "geostatic", 0.2, contact=..., h_far=0.3)` with the blow as one particle load
+on the head row, positions printed every 600 steps; not in the repo.) The run at 0.15 m first
 fell through the sand (2.1 m in the first blow): the surface vertex on the axis had been
 moved to r = -7e-9 by the preload and left the grid (mended in contact.penalty).
 The seed's gravity stage (`--h 0.15 --start ramp --blows 0 [--contact penalty]`, 2 s ramp,
