@@ -117,10 +117,10 @@ period.) At h = 0.15 m the blows drive the pile 0.38 and 0.13 m (seed ~0.11 m a 
 grid velocity, and 0.2 s into the first blow the vertex on the axis is 18 cm below the
 pile's tip vertex and 6 cm below the sand's particles there, the vertices next to it have
 slid round the rounded tip to the shaft, and the sand at the axis has opened a gap under
-the tip (its top particle 9 cm below the pile's lowest one; 2.5-3 cm, adjacent particles,
+the tip (its top particle 9 cm below the pile's lowest one; 1-3 cm, adjacent particles,
 with multi-velocity contact at the same time, where the pile sank as fast). The pile then
 rests on the rim of its tip and on its shaft and keeps sinking between the blows (0.07 m
-from t = 0.43 to 0.69 s under a 10-30 kN contact force), blow 2 deeper than blow 1 (0.488 m
+from t = 0.43 to 0.69 s under a contact force of 0-25 kN), blow 2 deeper than blow 1 (0.488 m
 with multi-velocity). Not converged either; a surface that follows the particles (re-built
 from them, or CPDI corners as the seed's) would be the next step. (Diagnostic runs of
 `build(0.075, "geostatic", 0.2, contact=..., h_far=0.3)` with the blow as one particle load
