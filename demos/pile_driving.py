@@ -113,18 +113,18 @@ Penalty contact (--contact penalty, 2026-12-07 night, serial, 2 blows; `--h H [-
     peak resistance, blow 1        140.4 kN         274.4 kN          272.9 kN      114.5 kN
 (--quick: the pile rebounds off the blow and is still in flight at the end of its 0.25 s
 period.) At h = 0.15 m the blows drive the pile 0.38 and 0.13 m (seed ~0.11 m a blow), but at
-0.075 m the sand's surface line does not stay on the sand: its vertices move with the sand's
-grid velocity, and 0.2 s into the first blow the vertex on the axis is 18 cm below the
-pile's tip vertex and 6 cm below the sand's particles there, the vertices next to it have
-slid round the rounded tip to the shaft, and the sand at the axis has opened a gap under
-the tip (its top particle 9 cm below the pile's lowest one; 1-3 cm, adjacent particles,
-with multi-velocity contact at the same time, where the pile sank as fast). The pile then
-rests on the rim of its tip and on its shaft and keeps sinking between the blows (0.07 m
-from t = 0.43 to 0.69 s under a contact force of 0-25 kN), blow 2 deeper than blow 1 (0.488 m
-with multi-velocity). Not converged either; a surface that follows the particles (re-built
-from them, or CPDI corners as the seed's) would be the next step. (Diagnostic runs of
-`build(0.075, "geostatic", 0.2, contact=..., h_far=0.3)` with the blow as one particle load
-on the head row, positions printed every 600 steps; not in the repo.) The run at 0.15 m first
+0.075 m the sand's surface line does not stay on the sand (`python3 -c "import sys;
+sys.path.insert(0, 'demos'); import pile_driving as d; d.trace(0.075, 0.4, 'penalty')"`, and
+'multi-velocity'): its vertices move with the sand's grid velocity, and the surface vertex on
+the axis runs ahead of the sand there: 4.3 cm below the sand's highest particle at the axis at
+t = 0.352 s (0.15 s into the first blow), 19 cm at t = 0.398 s, when it is 18 cm below the
+pile's lowest vertex. Meanwhile the sand at the axis first opens a gap under the tip (its
+highest particle 9.1 cm below the pile's lowest at t = 0.352 s; 1-3 cm, adjacent particles,
+with multi-velocity contact) and closes it again (0.5 cm at t = 0.398 s). With no line under
+its tip the pile keeps sinking between the blows (0.07 m from t = 0.43 to 0.69 s under a
+contact force of 0-25 kN), blow 2 deeper than blow 1 (0.488 m with multi-velocity). Not
+converged either; a surface that follows the particles (re-built from them, or CPDI corners
+as the seed's) would be the next step. The run at 0.15 m first
 fell through the sand (2.1 m in the first blow): the surface vertex on the axis had been
 moved to r = -7e-9 by the preload and left the grid (mended in contact.penalty).
 The seed's gravity stage (`--h 0.15 --start ramp --blows 0 [--contact penalty]`, 2 s ramp,
@@ -309,6 +309,40 @@ def hammer(t0, period=T_PERIOD):
         s = t - t0
         return s >= 0.0 and (s % period) < T_ON - 1e-12
     return on
+
+
+def trace(h, t_end, contact="penalty", h_far=0.3, every=600):
+    """Diagnostic of the first blow (docstring, "Penalty contact"): build(h, "geostatic", 0.2,
+    contact, h_far), then the blow as one particle load q pi R^2 (per radian q R^2 / 2) shared
+    by the pile's head row (not per annulus as main); every `every` steps after t = 0.25 s
+    prints (rank 0) the pile's lowest particle, the sand's highest particle within 0.04 m of
+    the axis (below that + 0.3 m) and, with penalty contact, the lowest pile vertex and the
+    sand's surface vertex on the axis. Collective."""
+    sim, _, _ = build(h, "geostatic", 0.2, contact=contact, h_far=h_far)
+    p = sim.particles
+    pile = p.material_id == PILE
+    p.add_field("head")[:] = pile & (p.x[:, 1] > gmax_of(comm, p.x[pile, 1]) - 0.25 * h)
+    on = hammer(0.2)
+    sim.add_particle_load(lambda x: sim.particles.head > 0,
+                          lambda t: (0.0, -Q_BLOW * R_PILE ** 2 / 2 if on(t) else 0.0))
+    n_pile = len(pile_outline(h / 2))            # the pile's vertices come first (build)
+
+    def show(s):
+        if s.t < 0.25:
+            return
+        q = s.particles
+        tip = gmin_of(comm, q.x[q.material_id == PILE, 1])
+        axis = (q.material_id == SOIL) & (q.x[:, 0] < 0.04) & (q.x[:, 1] < tip + 0.3)
+        out = (f"t = {s.t:.4f} s: pile's lowest particle z = {tip:.4f} m, the sand's highest "
+               f"at the axis {gmax_of(comm, q.x[axis, 1]):.4f} m")
+        if contact == "penalty":
+            xv = s.integrator.checkpoint_state()["penalty_x"]     # replicated
+            out += (f", lowest pile vertex {xv[:n_pile, 1].min():.4f} m, the sand's vertex on "
+                    f"the axis {xv[-1, 1]:.4f} m")
+        if comm.rank == 0:
+            print(out, flush=True)
+    sim.observe(show, every=every)
+    sim.run(t_end=t_end, progress=None)
 
 
 def main(argv=None):

@@ -135,3 +135,21 @@ def test_surface_settlement_follows_the_particles_that_started_on_top():
         x, u, soil = x[:0], u[:0], soil[:0]
     s = demo.surface_settlement(x, u, soil, 4.8, h)
     assert abs(s - 0.07) < 1e-12, s
+
+
+@pytest.mark.heavy
+def test_trace_prints_the_tip_and_the_axis(capsys):
+    """demos/pile_driving.trace (the diagnostic behind the docstring's penalty figures) runs
+    serially and on 2 ranks and prints, after t = 0.25 s, the pile's lowest particle, the
+    sand's highest at the axis and the two vertices; the sand's axis vertex lies below the
+    pile's lowest vertex (the surface is under the tip)."""
+    demo = load_demo("pile_driving")
+    demo.trace(0.15, 0.27, "penalty", h_far=0.6, every=50)
+    out = capsys.readouterr().out
+    if demo.comm.rank == 0:
+        rows = [r for r in out.splitlines() if r.startswith("t = ")]
+        assert rows, out
+        last = rows[-1]
+        pile_v = float(last.split("lowest pile vertex ")[1].split(" m")[0])
+        sand_v = float(last.split("the sand's vertex on the axis ")[1].split(" m")[0])
+        assert sand_v < pile_v, last

@@ -473,7 +473,7 @@ class PenaltyContact:
             if not rigid[a]:
                 shift[s] -= (pn / self.k_n + g) * (1.0 if rigid[b] else 0.5) * en
         self.x += shift
-        self._keep_on_grid(sim)
+        self._clamp_at_axis(sim)
         self.ft = ft0
 
     def forces(self, sim, present, m_b, rigid, mu, dt):
@@ -544,9 +544,9 @@ class PenaltyContact:
         v[r] = v_rigid[self.vbody[r]]
         self.du = dt * v
         self.x += self.du
-        self._keep_on_grid(sim)
+        self._clamp_at_axis(sim)
 
-    def _keep_on_grid(self, sim):
+    def _clamp_at_axis(self, sim):
         """On an axisymmetric grid no vertex crosses the axis: r = max(r, 0) (a vertex on the
         axis moves with a radial velocity of round-off size, and at r < 0 it would leave the
         grid, lose its weight W_v and stop moving)."""
