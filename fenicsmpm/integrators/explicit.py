@@ -35,6 +35,7 @@ import time
 
 import numpy as np
 
+from ..kernels import nodal
 from ..kernels import transfer as kt
 
 _log = logging.getLogger("fenicsmpm")
@@ -209,7 +210,9 @@ class Explicit:
 
     def _grid_velocity(self, momentum, inv_m, free):
         """v_i = (m v)_i / m_i on active nodes, 0 on inactive nodes and fixed components."""
-        return momentum * inv_m[:, None] * free
+        v = np.empty_like(momentum)
+        nodal.grid_velocity(momentum, inv_m, free, v)
+        return v
 
     def _contact(self, sim, v, dt, mass):
         """Frictional boundaries project the trial nodal velocities v in place for the gaps of
@@ -242,7 +245,8 @@ class Explicit:
         early = self.scheme in ("USF", "AVG")
         active = sim.active_mask(m, restrict=early)
         t0 = time.perf_counter()
-        inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
+        inv_m = np.empty_like(m)
+        nodal.inverse_mass(m, active, inv_m)
         free = ~sim.fixed
         v0 = self._grid_velocity(mv, inv_m, free)
         vp = self._vp = self._prescribed(sim, dt)      # fixed dofs' velocity this step
@@ -266,9 +270,10 @@ class Explicit:
             f -= self.damping * m[:, None] * v0
         t1 = time.perf_counter()
         kick = self._kick(sim, dt)                 # dt, or dt / 2 on a leapfrog start
-        v1 = v0 + kick * f * inv_m[:, None] * free
-        reaction = np.where(sim.fixed & active[:, None],          # R = m (v - v*) / kick
-                            m[:, None] * (v1 - (mv + kick * f) * inv_m[:, None]) / kick, 0.0)
+        v1 = np.empty_like(v0)
+        nodal.kicked_velocity(v0, f, inv_m, free, kick, v1)
+        reaction = np.empty_like(v1)                       # R = m (v - v*) / kick
+        nodal.fixed_reaction(sim.fixed, active, m, v1, mv, f, inv_m, kick, reaction)
         if vp is not None:                          # the work of moving the fixed dofs
             fr = reaction if fr is None else fr + reaction
         if sim.frictions:                           # contact force m (v1 - v1_trial) / dt
@@ -315,5 +320,4 @@ class Explicit:
         if sim.robin is not None:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction, displacement=du)
-        np.subtract(p.v, p.a, out=p.a)    # particle acceleration a = (v_new - v_old) / dt
-        p.a /= kick
+        nodal.particle_acceleration(p.v, p.a, kick)   # a = (v_new - v_old) / dt
