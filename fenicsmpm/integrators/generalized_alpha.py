@@ -31,6 +31,7 @@ from collections import namedtuple
 import numpy as np
 from numba import njit
 
+from ..kernels import nodal
 from ..kernels import transfer as kt
 from .implicit import Newmark, _Newton
 
@@ -192,10 +193,11 @@ class ExplicitGeneralizedAlpha:
         T["p2g"] += time.perf_counter() - t0
         active = sim.active_mask(m)
         t0 = time.perf_counter()
-        inv_m = np.divide(1.0, m, out=np.zeros_like(m), where=active)
+        inv_m, a0, v0 = np.empty_like(m), np.empty_like(ma), np.empty_like(mv)
+        nodal.inverse_mass(m, active, inv_m)
         free = ~sim.fixed
-        a0 = ma * inv_m[:, None] * free
-        v0 = mv * inv_m[:, None] * free
+        nodal.grid_velocity(ma, inv_m, free, a0)        # (m a)_i / m_i on free components
+        nodal.grid_velocity(mv, inv_m, free, v0)
         T["solve"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         f = np.zeros_like(mv)
@@ -208,7 +210,9 @@ class ExplicitGeneralizedAlpha:
         if fr is not None:
             f += fr
         t1 = time.perf_counter()
-        a1, v1, du = explicit_update(prm, dt, v0, a0, f * inv_m[:, None] * free)
+        acc = np.empty_like(f)
+        nodal.grid_velocity(f, inv_m, free, acc)          # f_i / m_i on free components
+        a1, v1, du = explicit_update(prm, dt, v0, a0, acc)
         t2 = time.perf_counter()
         g2p_generalized_alpha(grid.D, sim.nodes, sim.N, du, a0, a1, v1, shift, dt, self.flip,
                               p.x, p.u, p.v, p.a)
