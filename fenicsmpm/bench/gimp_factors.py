@@ -37,9 +37,11 @@ SIZES = {"full": dict(cells=512, repeats=7), "quick": dict(cells=40, repeats=3)}
 def factors(x, lp0, F, origin, spacing, lo, hi, ilo, nlat, base, S, dS):
     """Per particle the flat lattice offset of its first node (base) and the 1D cpGIMP factors
     S[p, k, a], dS[p, k, a] of the 3 nodes from it along axis k (0 past the box), by
-    shapes.gimp's half_width, _closed_weight and _weight (2D)."""
+    shapes.gimp's half_width, _closed_weight and _weight (2D). Returns the number of particles
+    whose box reaches a 4th node on an axis (a box stretched past a cell: not stored here)."""
     inv_L = 1.0 / spacing
     inv_2L = 0.5 / spacing
+    wide = 0
     for q in range(x.shape[0]):
         b0 = 0
         stride = 1
@@ -50,6 +52,8 @@ def factors(x, lp0, F, origin, spacing, lo, hi, ilo, nlat, base, S, dS):
             b = min(x[q, k] + lp, hi[k])
             j0 = int(np.floor((a - origin[k]) / L))
             m = int(np.ceil((b - origin[k]) / L)) - j0 + 1
+            if m > 3:
+                wide += 1
             closed = lp <= 0.5 * L and a == x[q, k] - lp and b == x[q, k] + lp
             inv_w = 1.0 / (b - a)
             inv_Ll = 1.0 / (L * lp) if closed else 0.0
@@ -67,6 +71,7 @@ def factors(x, lp0, F, origin, spacing, lo, hi, ilo, nlat, base, S, dS):
             b0 += (j0 - ilo[k]) * stride
             stride *= nlat[k]
         base[q] = b0
+    return wide
 
 
 @njit(cache=True)
@@ -137,6 +142,9 @@ def measure(sim, repeats):
     t = {"shape": (_fastest(repeats, lambda: gimp._gimp(
             g.D, x, lp0, F, True, *shape_args[3:], lat["table"], ns, np.int64(0), n, *rows)),
         _fastest(repeats, lambda: factors(*shape_args, base, S, dS)))}
+    if factors(*shape_args, base, S, dS):
+        raise ValueError("gimp-factors: a particle's box reaches 4 lattice nodes on an axis "
+                         "(stretched past a cell); the factored layout here stores 3")
     nodes, N, dN = (np.ascontiguousarray(a[:, :max(int(rows[3].max(initial=1)), 1)])
                     for a in rows[:3])
     table, nx = lat["table"], int(lat["nlat"][0])
