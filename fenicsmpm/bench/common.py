@@ -213,6 +213,18 @@ def best_of(repeats, fn, *args):
     return rec
 
 
+def fastest_call(repeats, fn):
+    """Seconds of the fastest of `repeats` calls fn() after one untimed warm-up call (kernel
+    timings: bench fused, gimp-factors)."""
+    fn()
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        fn()
+        best = min(best, time.perf_counter() - t0)
+    return best
+
+
 def fit_slope(h, err):
     """Least-squares slope of log(err) against log(h) over the positive finite errors
     (None with fewer than two)."""

@@ -15,7 +15,6 @@ Each pass: the fastest of `repeats` calls after one warm-up call, on numba's thr
 (NUMBA_NUM_THREADS). Metrics: ms per call fused and separate, speed-up = separate / fused,
 particle-updates/s of the fused pass. Writes fused.json and fused.png (bars per run)."""
 import os
-import time
 
 import numpy as np
 
@@ -23,16 +22,6 @@ from . import common
 
 CASE = "fused"
 SIZES = {"full": dict(n=1_000_000, repeats=7), "quick": dict(n=100_000, repeats=3)}
-
-
-def _fastest(repeats, fn):
-    fn()
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
 
 
 def _data(n, nv, rng):
@@ -79,8 +68,8 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     for nv in (4, 9):
         a = _data(n, nv, rng)
         for kernel, (fused, separate) in _passes(a).items():
-            t_sep = _fastest(repeats, separate)
-            t_fused = _fastest(repeats, fused)
+            t_sep = common.fastest_call(repeats, separate)
+            t_fused = common.fastest_call(repeats, fused)
             cfg = dict(integrator="Explicit", scheme="MUSL", shape="mpm" if nv == 4 else "cpgimp",
                        h=float("nan"), dt=float("nan"), ppc=4, cell_type="none (kernels only)",
                        kernel=kernel, nodes_per_particle=nv, threads=get_num_threads())

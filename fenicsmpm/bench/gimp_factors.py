@@ -21,7 +21,6 @@ the factored kernels here), the fastest of `repeats` calls. The factored force h
 active-node restriction (the rows' force is called without it too). Metrics per pass: ms rows,
 ms factors, ratio. Writes gimp-factors.json and gimp-factors.png."""
 import os
-import time
 
 import numpy as np
 from numba import njit
@@ -115,16 +114,6 @@ def force_factors(base, S, dS, table, nx, mass, V, stress, out):
                 out[i, 1] += wm * 0.0 - vp * (s10 * b0 + s11 * b1)
 
 
-def _fastest(repeats, fn):
-    fn()
-    best = np.inf
-    for _ in range(repeats):
-        t0 = time.perf_counter()
-        fn()
-        best = min(best, time.perf_counter() - t0)
-    return best
-
-
 def measure(sim, repeats):
     """{pass: (seconds rows, seconds factors)} and whether the factored P2G and force give
     the rows' bits, on the local particles of a cpGIMP Simulation on a 2D lattice."""
@@ -139,9 +128,12 @@ def measure(sim, repeats):
     shape_args = (p.x, p.gimp_l0, p.F, lat["origin"], lat["spacing"], lat["lo"], lat["hi"],
                   lat["ilo"], lat["nlat"])
     x, lp0, F = shape_args[:3]
-    t = {"shape": (_fastest(repeats, lambda: gimp._gimp(
-            g.D, x, lp0, F, True, *shape_args[3:], lat["table"], ns, np.int64(0), n, *rows)),
-        _fastest(repeats, lambda: factors(*shape_args, base, S, dS)))}
+    def shape_rows():
+        gimp._gimp(g.D, x, lp0, F, True, *shape_args[3:], lat["table"], ns, np.int64(0), n,
+                   *rows)
+
+    t = {"shape": (common.fastest_call(repeats, shape_rows),
+                   common.fastest_call(repeats, lambda: factors(*shape_args, base, S, dS)))}
     if factors(*shape_args, base, S, dS):
         raise ValueError("gimp-factors: a particle's box reaches 4 lattice nodes on an axis "
                          "(stretched past a cell); the factored layout here stores 3")
@@ -150,25 +142,25 @@ def measure(sim, repeats):
     table, nx = lat["table"], int(lat["nlat"][0])
     m1, m2 = np.zeros(g.n_nodes), np.zeros(g.n_nodes)
     mv1, mv2 = np.zeros((g.n_nodes, 2)), np.zeros((g.n_nodes, 2))
-    t["p2g"] = (_fastest(repeats, lambda: kt._mass_momentum(g.D, nodes, N, p.mass, p.v,
-                                                            np.int64(0), n, m1, mv1)),
-                _fastest(repeats, lambda: p2g_factors(base, S, table, nx, p.mass, p.v, m2, mv2)))
     stress = p.stress.copy()
     stress[:, :2, :2] += np.random.default_rng(0).standard_normal((n, 2, 2))
     f1, f2 = np.zeros((g.n_nodes, 2)), np.zeros((g.n_nodes, 2))
     no_active = np.zeros((0, 1), dtype=np.bool_)
-    t["force"] = (_fastest(repeats, lambda: kt._force(g.D, nodes, N, dN, p.mass, p.V, stress,
-                                                      np.zeros(2), no_active, np.int64(0), n,
-                                                      f1)),
-                  _fastest(repeats, lambda: force_factors(base, S, dS, table, nx, p.mass, p.V,
-                                                          stress, f2)))
+    passes = {
+        "p2g": (lambda: kt._mass_momentum(g.D, nodes, N, p.mass, p.v, np.int64(0), n, m1, mv1),
+                lambda: p2g_factors(base, S, table, nx, p.mass, p.v, m2, mv2)),
+        "force": (lambda: kt._force(g.D, nodes, N, dN, p.mass, p.V, stress, np.zeros(2),
+                                    no_active, np.int64(0), n, f1),
+                  lambda: force_factors(base, S, dS, table, nx, p.mass, p.V, stress, f2))}
+    for name, (by_rows, by_factors) in passes.items():
+        t[name] = (common.fastest_call(repeats, by_rows),
+                   common.fastest_call(repeats, by_factors))
     # one call each from zero: the bits of the two layouts
     for a in (m1, m2, mv1, mv2, f1, f2):
         a[:] = 0.0
-    kt._mass_momentum(g.D, nodes, N, p.mass, p.v, np.int64(0), n, m1, mv1)
-    p2g_factors(base, S, table, nx, p.mass, p.v, m2, mv2)
-    kt._force(g.D, nodes, N, dN, p.mass, p.V, stress, np.zeros(2), no_active, np.int64(0), n, f1)
-    force_factors(base, S, dS, table, nx, p.mass, p.V, stress, f2)
+    for by_rows, by_factors in passes.values():
+        by_rows()
+        by_factors()
     same = bool(np.array_equal(m1, m2) and np.array_equal(mv1, mv2) and np.array_equal(f1, f2))
     return t, same, nodes.shape[1]
 
