@@ -537,7 +537,9 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         """Advance one time step (see `max_dt_cuts` for implicit retries; dt="auto" follows the
         state, follow_state_dt)."""
         if self._dt_auto and self.integrator.explicit:
+            t0 = time.perf_counter()
             self.follow_state_dt()
+            self.timers["guards"] += time.perf_counter() - t0    # a check of the state's dt
         cuts = []
         try:
             self._advance(self.dt, self.max_dt_cuts, cuts)

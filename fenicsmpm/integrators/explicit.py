@@ -234,7 +234,9 @@ class Explicit:
         """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
+        t0 = time.perf_counter()
         p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
+        T["g2p"] += time.perf_counter() - t0
         t0 = time.perf_counter()
         self._gaps = [b.gaps(sim) for b in sim.frictions]
         m, mv = self._p2g(sim)
@@ -243,8 +245,9 @@ class Explicit:
         # the gradients' restriction to the active nodes: here (timed as "shape") where the
         # stress is updated before the internal force, else in the force's pass ("p2g")
         early = self.scheme in ("USF", "AVG")
+        t0, shape_t = time.perf_counter(), T["shape"]
         active = sim.active_mask(m, restrict=early)
-        t0 = time.perf_counter()
+        t0 += T["shape"] - shape_t                 # (its restriction pass counts as "shape")
         inv_m = np.empty_like(m)
         nodal.inverse_mass(m, active, inv_m)
         free = ~sim.fixed
@@ -283,6 +286,7 @@ class Explicit:
             fr = fc if fr is None else fr + fc
         sim.record_work(f_ext, fr, v0, v1, dt)       # fixed components: v0 = v1 = 0
         t2 = time.perf_counter()
+        du = dt * v1                                # what the particles move by (CPDI2 corners)
         affine = self.transfer in AFFINE
         remap = self.scheme in ("MUSL", "AVG")     # the updated velocities mapped back
         mv2 = None
@@ -292,22 +296,21 @@ class Explicit:
             v_to_p = v1 - self._xpic_change(sim, mv * inv_m[:, None], inv_m) * free
         if affine and remap:                         # G2P and that P2G in one particle pass
             mv2 = np.zeros_like(mv)
-            kt.g2p_affine_momentum(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v0,
-                                   v1, aflip, p.x, p.v, p.u, p.apic_C, p.mass, mv2)
+            kt.g2p_affine_momentum(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, du, v0, v1,
+                                   aflip, p.x, p.v, p.u, p.apic_C, p.mass, mv2)
         elif affine:
-            kt.g2p_affine(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, dt * v1, v0, v1,
-                          aflip, p.x, p.v, p.u, p.apic_C)
+            kt.g2p_affine(grid.D, sim.nodes, sim.N, sim.dN, grid.node_x, du, v0, v1, aflip,
+                          p.x, p.v, p.u, p.apic_C)
         elif remap:
             mv2 = np.zeros_like(mv)
-            kt.g2p_momentum(grid.D, sim.nodes, sim.N, dt * v1, v0, v_to_p, self.flip, p.x, p.v,
+            kt.g2p_momentum(grid.D, sim.nodes, sim.N, du, v0, v_to_p, self.flip, p.x, p.v,
                             p.u, p.mass, mv2)
         else:
-            kt.g2p(grid.D, sim.nodes, sim.N, dt * v1, v0, v_to_p, self.flip, p.x, p.v, p.u)
+            kt.g2p(grid.D, sim.nodes, sim.N, du, v0, v_to_p, self.flip, p.x, p.v, p.u)
         t3 = time.perf_counter()
         T["p2g"] += t1 - t0
         T["solve"] += t2 - t1
         T["g2p"] += t3 - t2
-        du = dt * v1                                # what the particles moved by (CPDI2 corners)
         if remap:
             grid.accumulate(mv2)
             v1 = self._grid_velocity(mv2, inv_m, free)
@@ -317,7 +320,9 @@ class Explicit:
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             sim.stress_update(v1, dt if self.scheme != "AVG" else 0.5 * dt)
+        t0 = time.perf_counter()
         if sim.robin is not None:
             sim.robin_u += dt * v1
         sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction, displacement=du)
         nodal.particle_acceleration(p.v, p.a, kick)   # a = (v_new - v_old) / dt
+        T["g2p"] += time.perf_counter() - t0
