@@ -4,6 +4,7 @@ Stages (DESIGN.md): locate -> shape -> P2G -> grid solve (the integrator) -> G2P
 constitutive update. The integrator decides the order; the stage functions live here. The set-up
 API (fix, add_traction, add_boundary, start_stage, probe, ...) is inherited from
 setup.SetupMixin, the energy monitor from energy.EnergyMixin; Probe and Output live in io/."""
+import contextlib
 import logging
 import math
 import time
@@ -31,6 +32,8 @@ from .shapes import choose_shape, resolve_shape, standard as ks, wide_shape
 
 _NOT_RIGID = np.zeros(1, dtype=np.bool_)
 MANY_STEPS = 1_000_000         # dt="auto" runs longer than this many steps are warned about
+STAGES = ("locate", "shape", "p2g", "solve", "g2p", "constitutive", "guards")  # sim.timers
+SUBSTAGES = ("assembly", "ksp")      # parts of "solve" (implicit), also in sim.timers
 WAVE_CHECK_EVERY = 100         # steps between guards.check_wave_speed checks
 DT_BAND = 1.1                  # dt="auto" changes when the state's critical step moves by 10 %
 
@@ -136,8 +139,7 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         self.observers = []
         self.nodal = {}
         self.stats = {}
-        self.timers = dict(locate=0.0, shape=0.0, p2g=0.0, solve=0.0, g2p=0.0, constitutive=0.0,
-                           guards=0.0, assembly=0.0, ksp=0.0)
+        self.timers = dict.fromkeys(STAGES + SUBSTAGES, 0.0)
         self.axisymmetric = grid.axisymmetric
         self._field = np.zeros(0, dtype=np.int32)
         self._check_options(on_leave, max_dt_cuts, shape, stress_feedback, gravity_ramp,
@@ -260,6 +262,18 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
             self.nodes, self.N, self.dN = raise_together(self.comm, self._wide.evaluate, self)
         self.timers["locate"] += t1 - t0
         self.timers["shape"] += time.perf_counter() - t1
+
+    @contextlib.contextmanager
+    def timed(self, stage):
+        """Time a block as `stage` (one of STAGES), less what the stages timed inside it took
+        (those count as themselves, a nested block of the same stage once), so the stages of a
+        step add up to its wall time."""
+        T = self.timers
+        t0, inner = time.perf_counter(), sum(T[k] for k in STAGES)
+        try:
+            yield
+        finally:
+            T[stage] += time.perf_counter() - t0 - (sum(T[k] for k in STAGES) - inner)
 
     def nodal_mass_momentum(self):
         """Local nodal mass and momentum in one particle pass (not yet summed over ranks)."""
@@ -537,9 +551,8 @@ class Simulation(SetupMixin, EnergyMixin, CheckpointMixin):
         """Advance one time step (see `max_dt_cuts` for implicit retries; dt="auto" follows the
         state, follow_state_dt)."""
         if self._dt_auto and self.integrator.explicit:
-            t0 = time.perf_counter()
-            self.follow_state_dt()
-            self.timers["guards"] += time.perf_counter() - t0    # a check of the state's dt
+            with self.timed("guards"):                # a check of the state's dt
+                self.follow_state_dt()
         cuts = []
         try:
             self._advance(self.dt, self.max_dt_cuts, cuts)

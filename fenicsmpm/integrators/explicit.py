@@ -234,9 +234,8 @@ class Explicit:
         """Advance `sim` by dt (integrator protocol: called by Simulation.step)."""
         p, grid, T = sim.particles, sim.grid, sim.timers
         sim.locate_and_shape()
-        t0 = time.perf_counter()
-        p.a[:] = p.v                      # the start-of-step velocity, for the acceleration
-        T["g2p"] += time.perf_counter() - t0
+        with sim.timed("g2p"):
+            p.a[:] = p.v                  # the start-of-step velocity, for the acceleration
         t0 = time.perf_counter()
         self._gaps = [b.gaps(sim) for b in sim.frictions]
         m, mv = self._p2g(sim)
@@ -245,9 +244,9 @@ class Explicit:
         # the gradients' restriction to the active nodes: here (timed as "shape") where the
         # stress is updated before the internal force, else in the force's pass ("p2g")
         early = self.scheme in ("USF", "AVG")
-        t0, shape_t = time.perf_counter(), T["shape"]
-        active = sim.active_mask(m, restrict=early)
-        t0 += T["shape"] - shape_t                 # (its restriction pass counts as "shape")
+        with sim.timed("solve"):                   # (its restriction pass counts as "shape")
+            active = sim.active_mask(m, restrict=early)
+        t0 = time.perf_counter()
         inv_m = np.empty_like(m)
         nodal.inverse_mass(m, active, inv_m)
         free = ~sim.fixed
@@ -320,9 +319,9 @@ class Explicit:
             T["p2g"] += time.perf_counter() - t3
         if self.scheme != "USF":
             sim.stress_update(v1, dt if self.scheme != "AVG" else 0.5 * dt)
-        t0 = time.perf_counter()
-        if sim.robin is not None:
-            sim.robin_u += dt * v1
-        sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction, displacement=du)
-        nodal.particle_acceleration(p.v, p.a, kick)   # a = (v_new - v_old) / dt
-        T["g2p"] += time.perf_counter() - t0
+        with sim.timed("g2p"):
+            if sim.robin is not None:
+                sim.robin_u += dt * v1
+            sim.nodal = dict(mass=m, velocity=v1, active=active, reaction=reaction,
+                             displacement=du)
+            nodal.particle_acceleration(p.v, p.a, kick)   # a = (v_new - v_old) / dt

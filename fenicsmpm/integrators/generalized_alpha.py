@@ -191,7 +191,8 @@ class ExplicitGeneralizedAlpha:
         ma = sim.nodal_weighted(p.a)
         grid.accumulate(m, mv, ma)
         T["p2g"] += time.perf_counter() - t0
-        active = sim.active_mask(m)
+        with sim.timed("solve"):                   # (its restriction pass counts as "shape")
+            active = sim.active_mask(m)
         t0 = time.perf_counter()
         inv_m, a0, v0 = np.empty_like(m), np.empty_like(ma), np.empty_like(mv)
         nodal.inverse_mass(m, active, inv_m)

@@ -50,7 +50,6 @@ from ..kernels import transfer as kt
 from ..materials import first_piola, first_piola_tangent
 from .linear_system import DEFAULT_PREFIX, LinearSystem, OutsidePattern, stencil_rings
 
-NESTED_STAGES = ("locate", "shape", "p2g", "g2p", "constitutive")   # timed inside "solve"
 MAX_RINGS = 4           # the widest implicit pattern _Newton._plan grows to (cell rings)
 AUTO_LINE_SEARCH = 6    # line_search="auto": the backtracking depth of the retry of a failed step
 # line_search="auto": the retry's longest trial correction on any node, in cell sizes. Measured
@@ -191,15 +190,10 @@ class _Newton:
         return np.sqrt(sim.comm.allreduce(s) if sim.comm.size > 1 else s)
 
     def solve_step(self, sim, *args, **kw):
-        """_newton_step(sim, ...) (its docstring), timed as the stage "solve" less the stages
-        timed inside it (NESTED_STAGES: the residuals' stress updates), so the step's stages
-        add up to its wall time without counting any part twice."""
-        T = sim.timers
-        t0, nested = time.perf_counter(), sum(T[k] for k in NESTED_STAGES)
-        try:
+        """_newton_step(sim, ...) (its docstring), timed as "solve" (Simulation.timed: the
+        residuals' stress updates inside it count as "constitutive" only)."""
+        with sim.timed("solve"):
             return self._newton_step(sim, *args, **kw)
-        finally:
-            T["solve"] += time.perf_counter() - t0 - (sum(T[k] for k in NESTED_STAGES) - nested)
 
     def _newton_step(self, sim, dt, f_ext, m_coef, inertia, velocity=None, c_v=0.0,
                      v_start=None, du0=None, force_scale=0.0):
@@ -445,9 +439,9 @@ class Newmark(_Newton):
         ma = sim.nodal_weighted(p.a)
         grid.accumulate(m, mv, ma)
         sim.timers["p2g"] += time.perf_counter() - t0
-        t0, shape_t = time.perf_counter(), sim.timers["shape"]
-        active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
-        f_ext = sim.external_force(sim.t + dt, m, active=active)
+        with sim.timed("solve"):                    # (its restriction counts as "shape")
+            active = sim.active_mask(m)
+            f_ext = sim.external_force(sim.t + dt, m, active=active)
         v0 = np.zeros_like(mv)
         a0 = np.zeros_like(ma)
         v0[active] = mv[active] / m[active, None]
@@ -480,7 +474,6 @@ class Newmark(_Newton):
         du0 = dt * v0 + 0.5 * dt * dt * a0
         if moving is not None:
             du0[moving] = dup[moving]
-        sim.timers["solve"] += time.perf_counter() - t0 - (sim.timers["shape"] - shape_t)
         du = self.solve_step(sim, dt, f_ext, wm / (b * dt * dt),
                              lambda du: m[:, None] * (wm * accel(du) + am / (1.0 - af) * a0),
                              velocity, g / (b * dt), v0, du0=du0,
@@ -546,14 +539,14 @@ class QuasiStatic(_Newton):
         t0 = time.perf_counter()
         m = sim.nodal_mass()
         grid.accumulate(m)
-        t1, shape_t = time.perf_counter(), sim.timers["shape"]
-        sim.timers["p2g"] += t1 - t0
-        scale = min(1.0, (sim.step_count + 1) / self.load_steps)
-        active = sim.active_mask(m)                 # timed as "shape" (gradient restriction)
-        f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale, active=active)
-        sim.nodal = dict(mass=m, active=active)
-        du0 = sim.prescribed_increment(sim.t, sim.t + dt, self.displacement, fixed_only=False)
-        sim.timers["solve"] += time.perf_counter() - t1 - (sim.timers["shape"] - shape_t)
+        sim.timers["p2g"] += time.perf_counter() - t0
+        with sim.timed("solve"):
+            scale = min(1.0, (sim.step_count + 1) / self.load_steps)
+            active = sim.active_mask(m)             # timed as "shape" (gradient restriction)
+            f_ext = sim.external_force(sim.t + dt, m, gravity_scale=scale, active=active)
+            sim.nodal = dict(mass=m, active=active)
+            du0 = sim.prescribed_increment(sim.t, sim.t + dt, self.displacement,
+                                           fixed_only=False)
         du = self.solve_step(sim, dt, f_ext, 0.0, lambda du: 0.0, lambda du: du / dt, 1.0 / dt,
                              np.zeros((grid.n_nodes, sim.gdim)), du0=du0)
         t0 = time.perf_counter()
