@@ -178,6 +178,7 @@ def run(quick=False, out="bench-results", comm=None, verbose=True):
     t, same, nv = measure(sim, size["repeats"])
     n = sim.particles.n_global()
     same = comm.allreduce(same, op=MPI.LAND)
+    nv = comm.allreduce(nv, op=MPI.MAX)     # the rows' columns: the most nodes a particle has
     runs = []
     for name, (rows, fac) in t.items():
         rows, fac = comm.allreduce(rows, op=MPI.MAX), comm.allreduce(fac, op=MPI.MAX)
